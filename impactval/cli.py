@@ -1,0 +1,101 @@
+"""Command line: a thin layer over functions that return results or DataFrames (style.md, pattern 7).
+
+Exit codes: 0 fine, 1 a regression or failure flagged, 2 bad input.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import click
+
+from impactval.errors import ImpactvalError
+
+
+def _fmt(x: float, unit: str, scale: float) -> str:
+    return "n/a" if not math.isfinite(x) else f"{x * scale:.6f} {unit}"
+
+
+def _warn_if_compiling() -> None:
+    from impactval.reference import kernel
+
+    try:
+        path = Path(kernel.run._cache._cache_path)
+        cached = any(path.glob("kernel.run-*.nbi"))
+    except Exception:  # noqa: BLE001 - only a hint
+        cached = True
+    if not cached:
+        click.echo("impactval: first run: compiling the solver kernel (one time, ~20 s; cached afterwards)",
+                   err=True)
+
+
+class _Group(click.Group):
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except ImpactvalError as err:
+            click.echo(f"impactval: error: {err}", err=True)
+            ctx.exit(2)
+
+
+@click.group(cls=_Group)
+@click.version_option(package_name="impactval")
+def main() -> None:
+    """impactval: validation suite for physics engines on elastic impact (SI units)."""
+
+
+@main.command()
+@click.option("--tag", default=None, help="Only scenes carrying this tag.")
+def scenes(tag: str | None) -> None:
+    """List the built-in scene catalogue."""
+    from impactval.scenarios.scene import load_catalogue
+
+    for s in load_catalogue(tag):
+        click.echo(f"{s.name:26s} {s.target.kind:12s} [{', '.join(s.tags)}]  {s.description}")
+
+
+@main.command()
+@click.argument("scene", nargs=-1)
+@click.option("--tol", default=1e-6, show_default=True, type=float, help="Relative tolerance on t_m, f_m, delta_m.")
+@click.option("--window", default=0.0, show_default=True, type=float,
+              help="Time [s] to follow after the first contact ends (re-contacts).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object per scene (SI units).")
+@click.option("--curve", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Write the time series (t, delta, f, x_ball, x_structure, energy) to this CSV file.")
+def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, curve: str | None) -> None:
+    """Reference solution of SCENE (catalogue names or TOML paths; none = the whole catalogue)."""
+    import impactval
+    from impactval.scenarios.scene import catalogue_names
+
+    names = list(scene) or catalogue_names()
+    if curve and len(names) != 1:
+        raise ImpactvalError("--curve writes one scene's series: give exactly one SCENE.")
+    scenes_ = [impactval.load_scene(n) for n in names]
+    _warn_if_compiling()
+    if not as_json:
+        click.echo(f"{'scene':26s} {'t_m [us]':>14s} {'f_m [N]':>14s} {'delta_m [um]':>14s} "
+                   f"{'rel. unc.':>9s} {'modes':>5s} {'contacts':>8s}")
+    for sc in scenes_:
+        r = impactval.solve(sc, tol=tol, window=window)
+        u = r.uncertainty
+        if as_json:
+            click.echo(json.dumps({"scene": r.scene, "t_m": r.t_m, "f_m": r.f_m, "delta_m": r.delta_m,
+                                   "uncertainty": u.as_dict(), "modes": r.modes,
+                                   "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
+                                   "contacts": [c.__dict__ for c in r.contacts]}))
+        else:
+            rel = max(u.t_m / r.t_m, u.f_m / r.f_m, u.delta_m / r.delta_m)
+            click.echo(f"{r.scene:26s} {r.t_m * 1e6:14.6f} {r.f_m:14.6f} {r.delta_m * 1e6:14.6f} "
+                       f"{rel:9.1e} {r.modes:5d} {len(r.contacts):8d}")
+        if curve:
+            import numpy as np
+
+            data = np.column_stack([r.t, r.delta, r.f, r.x_ball, r.x_structure, r.energy])
+            np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
+                       comments="")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

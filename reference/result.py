@@ -1,0 +1,109 @@
+"""The result shape shared by the reference solver and every engine adapter (style.md, pattern 4)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: statuses every producer of an ImpactResult may report
+STATUSES = ("ok", "no-contact", "unstable", "crashed", "timeout", "not-installed", "skipped")
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """The three impact quantities: `t_m` [s], `f_m` [N], `delta_m` [m]."""
+
+    t_m: float
+    f_m: float
+    delta_m: float
+
+    def relative_to(self, ref: "Metrics") -> "Metrics":
+        """Signed relative differences (self - ref) / ref."""
+        return Metrics((self.t_m - ref.t_m) / ref.t_m, (self.f_m - ref.f_m) / ref.f_m,
+                       (self.delta_m - ref.delta_m) / ref.delta_m)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"t_m": self.t_m, "f_m": self.f_m, "delta_m": self.delta_m}
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One contact phase: start and end time [s], peak force [N] and peak approach [m]."""
+
+    t_start: float
+    t_end: float
+    f_max: float
+    delta_max: float
+
+
+@dataclass(frozen=True, eq=False)
+class ImpactResult:
+    """One impact as computed by the reference or by an engine.
+
+    Metrics of the *first* contact: `t_m` (duration) [s], `f_m` (peak force) [N], `delta_m`
+    (peak approach) [m]; `uncertainty` (same fields, absolute, None for engines).
+    Series: `t` [s], `f` [N], `delta` [m], `x_ball`, `x_structure` [m] (contact-point
+    displacements, positive into the target), `energy` [J] (ball kinetic + Hertz potential +
+    structure energy). `rebound_velocity` [m/s] is the ball's speed away from the target after
+    the first contact; `energy_error` the largest |E(t)/E(0) - 1|; `contacts` lists every contact
+    in the simulated window. `source` is "reference" or the engine name.
+    """
+
+    scene: str
+    source: str
+    model: str
+    t_m: float
+    f_m: float
+    delta_m: float
+    uncertainty: Metrics | None = None
+    modes: int = 0
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    f: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    delta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    x_ball: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    x_structure: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    energy: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rebound_velocity: float = math.nan
+    energy_error: float = math.nan
+    contacts: tuple[Contact, ...] = ()
+    status: str = "ok"
+    message: str = ""
+    version: str = ""
+    settings: dict[str, Any] = field(default_factory=dict)
+    n_steps: int = 0
+    wall_time_build_s: float = 0.0
+    wall_time_step_s: float = 0.0
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def metrics(self) -> Metrics:
+        return Metrics(self.t_m, self.f_m, self.delta_m)
+
+    @property
+    def wall_time_s(self) -> float:
+        return self.wall_time_build_s + self.wall_time_step_s
+
+    @classmethod
+    def failed(cls, scene: str, source: str, status: str, message: str, **kw: Any) -> "ImpactResult":
+        """A result with no numbers: `status` says why (see STATUSES)."""
+        if status not in STATUSES:
+            raise ValueError(f"unknown status {status!r}; known: {', '.join(STATUSES)}")
+        return cls(scene, source, kw.pop("model", ""), math.nan, math.nan, math.nan, status=status,
+                   message=message, **kw)
+
+    def summary(self) -> dict[str, Any]:
+        """Flat dict of the scalar fields (for tables and JSON)."""
+        out: dict[str, Any] = {"scene": self.scene, "source": self.source, "model": self.model,
+                               "status": self.status, "t_m": self.t_m, "f_m": self.f_m, "delta_m": self.delta_m}
+        if self.uncertainty is not None:
+            out.update({f"u_{k}": v for k, v in self.uncertainty.as_dict().items()})
+        out.update({"modes": self.modes, "rebound_velocity": self.rebound_velocity,
+                    "energy_error": self.energy_error, "n_contacts": len(self.contacts),
+                    "n_steps": self.n_steps, "wall_time_s": self.wall_time_s, "message": self.message})
+        return out

@@ -1,0 +1,241 @@
+"""The reference solution of a scene: Hertz contact on a modal structure, with error estimates.
+
+`solve(scene, tol)` returns an ImpactResult whose `uncertainty` covers
+- the time step: every solution is computed at two step sizes H and 2H; the scheme's order is
+  p + 1 = 6 (shown by tests/test_convergence.py), and the estimate |X_H - X_2H| / (2^4 - 1)
+  assumes only order 4, so it over-estimates the real error by ~4x in the asymptotic range (the
+  margin covers pre-asymptotic step sizes where the error changes sign);
+- modal truncation (beams with an automatic mode count): n modes plus the residual static
+  flexibility of all dropped modes (mode-acceleration correction) are compared with 2n modes;
+  the difference is reported as the truncation uncertainty of the n-mode result.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from impactval.errors import ImpactvalError
+from impactval.reference import kernel
+from impactval.reference.beams import Modes, beam_modes
+from impactval.reference.hertz import plate_impact
+from impactval.reference.result import Contact, ImpactResult, Metrics
+
+#: polynomial degree of the force interpolation (order of the scheme: P_DEGREE + 1)
+P_DEGREE = 5
+#: grading window as a fraction of the rigid-plate contact time
+GRADING_WINDOW = 0.2
+#: order assumed by the error estimate (one less than the scheme's, so the estimate is conservative)
+ESTIMATE_ORDER = 4
+#: steps per rigid-plate contact time at which the a-priori error model is anchored, and its error
+_N_ANCHOR, _ERR_ANCHOR = 20.0, 3e-6
+
+
+@dataclass(frozen=True)
+class Run:
+    """Metrics and series of one integration at a fixed base step."""
+
+    metrics: Metrics
+    n_steps: int
+    t: np.ndarray
+    delta: np.ndarray
+    f: np.ndarray
+    x_ball: np.ndarray
+    u_ball: np.ndarray
+    energy: np.ndarray
+    contacts: tuple[Contact, ...]
+    rebound_velocity: float
+
+
+def structure_modes(scene, n: int | None = None, residual: bool = False) -> Modes:
+    """The modal data of a scene's target (empty for a rigid plate). For a beam `n` modes are used."""
+    target = scene.target
+    if target.kind == "rigid-plate":
+        return Modes(np.zeros(0), np.zeros(0), np.zeros(0), 0.0)
+    if target.kind == "modal":
+        return Modes(np.asarray(target.omega, float), np.asarray(target.modal_mass, float),
+                     np.asarray(target.phi, float), 0.0)
+    return beam_modes(target, int(n if n is not None else (target.modes or 1)), residual=residual)
+
+
+def _select(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Arrays for the kernel: omega, g = phi^2/(m omega), energy weight omega/g; modes with
+    phi = 0 at the impact point are never excited and are dropped."""
+    keep = np.abs(modes.phi) > 1e-12
+    omega = np.ascontiguousarray(modes.omega[keep], dtype=float)
+    g = np.ascontiguousarray(modes.phi[keep] ** 2 / (modes.modal_mass[keep] * omega))
+    return omega, g, omega / g
+
+
+def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float,
+              window: float = 0.0, tol: float = 1e-6) -> Run:
+    """One integration with base step H = t_plate / n_steps (t_plate: rigid-plate duration).
+
+    `window` [s]: keep integrating this long after the first contact ends (re-contacts).
+    `tol` sets the smallest step H / 2^J used at touch and separation: the first step's force is
+    only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not to matter.
+    """
+    plate = plate_impact(mass, alpha, v0)
+    H = plate.t_m / n_steps
+    smallest = (1e-3 * tol) ** 0.4          # smallest step / t_plate
+    J = int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 4), 30))
+    omega, g, ew = _select(modes)
+    E, K, S = kernel.moments(omega, g, H, J, P_DEGREE)
+    max_nodes = int(6 * n_steps + 60 * J + 50 + (2.5 * window / H if window > 0 else 0))
+    for _ in range(8):
+        status, cnt, t, d, f, x, u, e, flags = kernel.run(
+            omega, g, ew, mass, alpha, v0, modes.residual_flexibility, H, J, P_DEGREE,
+            GRADING_WINDOW * plate.t_m, window, E, K, S, max_nodes)
+        if status == kernel.STATUS_OK:
+            break
+        max_nodes *= 4
+    else:  # pragma: no cover - would need a pathological scene
+        raise ImpactvalError(f"reference solver did not finish the contact within {max_nodes} steps")
+    t, d, f, x, u, e, flags = t[:cnt], d[:cnt], f[:cnt], x[:cnt], u[:cnt], e[:cnt], flags[:cnt]
+    contacts = _contacts(t, d, flags, alpha)
+    first = contacts[0]
+    end = int(np.argmax(flags == 2))
+    return Run(Metrics(first.t_end - first.t_start, first.f_max, first.delta_max), cnt - 1,
+               t, d, f, x, u, e, contacts, -float(u[end]))
+
+
+def _contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, alpha: float) -> tuple[Contact, ...]:
+    """Contact phases with sub-step start, end and peak (interpolating delta, which is smooth)."""
+    starts = np.flatnonzero(flags == 1)
+    ends = np.flatnonzero(flags == 2)
+    out = []
+    for k, s in enumerate(starts):
+        if s == 0:
+            t_start = 0.0
+        else:   # free flight is integrated exactly; the touch lies in a step of H / 2^J
+            t_start = float(t[s] - d[s] * (t[s + 1] - t[s]) / (d[s + 1] - d[s]))
+        e = ends[k] if k < len(ends) else len(t) - 1
+        if k < len(ends):
+            lo = max(e - 3, s)
+            t_end = float(kernel.crossing(t[lo:e + 1], d[lo:e + 1], t[e - 1], t[e]))
+        else:
+            t_end = math.nan    # still in contact at the end of the window
+        pk = s + int(np.argmax(d[s:e + 1]))
+        lo, hi = max(pk - 3, s + 1), min(pk + 4, e)
+        if hi - lo >= 3:
+            _, d_max = kernel.peak(t[lo:hi], d[lo:hi], t[max(pk - 1, lo)], t[min(pk + 1, hi - 1)])
+            d_max = max(float(d_max), float(d[pk]))
+        else:
+            d_max = float(d[pk])
+        out.append(Contact(t_start, t_end, alpha * d_max**1.5, d_max))
+    return tuple(out)
+
+
+def _estimate(fine: Metrics, coarse: Metrics) -> Metrics:
+    """Time-step uncertainty of `fine`. One relative bound for all three metrics (the largest of the
+    three Richardson estimates): a single metric's estimate can vanish where its error changes sign."""
+    rel = max(abs(fine.t_m - coarse.t_m) / fine.t_m, abs(fine.f_m - coarse.f_m) / fine.f_m,
+              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0)
+    return Metrics(rel * fine.t_m, rel * fine.f_m, rel * fine.delta_m)
+
+
+def _rel(u: Metrics, m: Metrics) -> float:
+    return max(u.t_m / m.t_m, u.f_m / m.f_m, u.delta_m / m.delta_m)
+
+
+def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float = 1e-6,
+                window: float = 0.0) -> tuple[Run, Metrics]:
+    """Solve to a relative time-step error estimate <= tol on t_m, f_m, delta_m.
+
+    Returns the finer run and its (absolute) time-step uncertainty.
+    """
+    n = max(8.0, _N_ANCHOR * (2.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    for _ in range(12):
+        fine = integrate(modes, mass, alpha, v0, n, window, tol)
+        coarse = integrate(modes, mass, alpha, v0, n / 2.0, 0.0, tol)
+        unc = _estimate(fine.metrics, coarse.metrics)
+        ratio = _rel(unc, fine.metrics) / tol
+        if ratio <= 1.0 or n > 1e6:
+            return fine, unc
+        n *= min(max(1.25, 1.1 * ratio ** (1.0 / ESTIMATE_ORDER)), 4.0)
+    return fine, unc
+
+
+def _check_tol(tol: float) -> float:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or not 1e-12 <= tol <= 0.1:
+        raise ImpactvalError(f"tol must be a relative tolerance between 1e-12 and 0.1, got {tol!r}.")
+    return float(tol)
+
+
+def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = None,
+          static_correction: bool = True) -> ImpactResult:
+    """Reference impact of `scene` with relative uncertainty <= `tol` on t_m, f_m, delta_m.
+
+    Parameters
+    ----------
+    scene : Scene
+        From :func:`impactval.load_scene`.
+    tol : float
+        Relative tolerance (1e-12 .. 0.1) for the time step and, with an automatic mode count, for
+        modal truncation (each gets half).
+    window : float
+        Time [s] to keep integrating after the first contact ends (re-contacts).
+    modes : int, optional
+        Beam mode count; overrides the scene's `modes`. An explicit count defines the model (exactly
+        n modes, no residual); None with no count in the scene chooses it automatically.
+    static_correction : bool
+        With an automatic mode count, add the residual static flexibility of the dropped modes.
+    """
+    tol = _check_tol(tol)
+    if not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
+        raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
+    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
+        raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
+    t0 = time.perf_counter()
+    ball = scene.ball
+    mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
+    target = scene.target
+    fixed = modes if modes is not None else getattr(target, "modes", None)
+    model = "hertz-rigid" if target.kind == "rigid-plate" else "hertz-modal"
+    if target.kind == "beam" and fixed is None:
+        run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
+        unc = Metrics(unc.t_m + trunc.t_m, unc.f_m + trunc.f_m, unc.delta_m + trunc.delta_m)
+        model += "+static" if static_correction else ""
+    else:
+        md = structure_modes(scene, fixed)
+        run, unc = solve_modes(md, mass, alpha, v0, tol, window)
+        n_modes = md.n
+    m = run.metrics
+    return ImpactResult(
+        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m,
+        uncertainty=unc, modes=n_modes, t=run.t, f=run.f, delta=run.delta, x_ball=run.x_ball,
+        x_structure=run.x_ball - run.delta, energy=run.energy, rebound_velocity=run.rebound_velocity,
+        energy_error=float(np.max(np.abs(run.energy / run.energy[0] - 1.0))), contacts=run.contacts,
+        settings={"tol": tol, "window": window, "p": P_DEGREE}, n_steps=run.n_steps,
+        wall_time_step_s=time.perf_counter() - t0,
+    )
+
+
+def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
+    """Double the mode count until n and 2n modes (each with the residual flexibility) agree to tol/2."""
+    ball = scene.ball
+    mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
+    n = initial_mode_count(scene)
+    prev = None
+    while True:
+        md = structure_modes(scene, n, residual=residual)
+        run, unc = solve_modes(md, mass, alpha, v0, tol / 2.0, window)
+        if prev is not None:
+            p_run, p_unc, p_n = prev
+            a, b = p_run.metrics, run.metrics
+            trunc = Metrics(abs(a.t_m - b.t_m), abs(a.f_m - b.f_m), abs(a.delta_m - b.delta_m))
+            if _rel(trunc, a) <= tol / 2.0 or n >= 20000:
+                return p_run, p_unc, p_n, trunc
+        prev = (run, unc, n)
+        n *= 2
+
+
+def initial_mode_count(scene) -> int:
+    """First guess of the beam mode count: the modes up to ~8x the rigid-plate impact frequency."""
+    target = scene.target
+    plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    md = beam_modes(target, 64)
+    below = int(np.sum(md.omega < 8.0 * plate.omega_m))
+    return max(4, below)

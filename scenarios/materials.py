@@ -1,0 +1,36 @@
+"""Built-in material catalogue (SI units: Pa, -, kg/m^3).
+
+Values are typical room-temperature handbook values:
+- steel: structural/bearing steel, E = 210 GPa, nu = 0.3, rho = 7800 (the paper's worked case).
+- aluminium: 6061-T6, E = 68.9 GPa, nu = 0.33, rho = 2700 (ASM Aerospace Specification Metals).
+- titanium: Ti-6Al-4V, E = 113.8 GPa, nu = 0.342, rho = 4430 (ASM Aerospace Specification Metals).
+- glass: soda-lime, E = 72 GPa, nu = 0.22, rho = 2500 (Shelby, Introduction to Glass Science).
+- tungsten-carbide: WC-Co (6 % Co), E = 614 GPa, nu = 0.22, rho = 15000 (manufacturer data sheets).
+- pmma: acrylic, E = 3.1 GPa, nu = 0.37, rho = 1190 (Ashby, Materials Selection).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Material:
+    """An isotropic linear-elastic material: `young` [Pa], `poisson` [-], `density` [kg/m^3]."""
+
+    name: str
+    young: float
+    poisson: float
+    density: float
+
+
+BUILTIN_MATERIALS: dict[str, Material] = {
+    m.name: m
+    for m in (
+        Material("steel", 210e9, 0.3, 7800.0),
+        Material("aluminium", 68.9e9, 0.33, 2700.0),
+        Material("titanium", 113.8e9, 0.342, 4430.0),
+        Material("glass", 72e9, 0.22, 2500.0),
+        Material("tungsten-carbide", 614e9, 0.22, 15000.0),
+        Material("pmma", 3.1e9, 0.37, 1190.0),
+    )
+}

@@ -1,0 +1,298 @@
+"""Scene definitions (frozen dataclasses) and the TOML loader with validation at the edge.
+
+A scene is a ball hitting a target at first touch. SI units everywhere:
+lengths in m, speeds in m/s, masses in kg, frequencies in rad/s, moduli in Pa.
+
+TOML format (public, names fixed)::
+
+    name = "beam_ss_midspan"           # optional; default: file stem
+    description = "..."                # optional
+    tags = ["beam", "paper"]           # optional
+    [ball]
+    radius = 0.01                      # m
+    velocity = 1.0                     # m/s, approach speed at first touch
+    material = "steel"
+    mass = 0.0327                      # optional, kg (overrides density x volume)
+    [target]
+    kind = "beam"                      # "rigid-plate" | "beam" | "modal"
+    material = "steel"                 # contact face (for a beam also its density and modulus)
+    support = "simply-supported"       # beam: "simply-supported" | "clamped-clamped" | "cantilever"
+    length = 0.5                       # beam, m
+    width = 0.01                       # beam, m
+    height = 0.01                      # beam, m (depth in the impact direction)
+    impact_at = 0.5                    # beam, fraction of the length from x = 0
+    modes = 40                         # beam, optional mode count (default: automatic)
+    omega = [..]                       # modal, rad/s
+    modal_mass = [..]                  # modal, kg (max-normalised shapes)
+    phi = [..]                         # modal, each mode's shape value at the impact point
+    [materials.NAME]                   # optional: add or override materials
+    young = 2.1e11
+    poisson = 0.3
+    density = 7800
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from impactval.errors import SceneError
+from impactval.scenarios.materials import BUILTIN_MATERIALS, Material
+
+SUPPORTS = ("simply-supported", "clamped-clamped", "cantilever")
+TARGET_KINDS = ("rigid-plate", "beam", "modal")
+CATALOGUE_DIR = Path(__file__).parent / "catalogue"
+
+
+@dataclass(frozen=True)
+class Ball:
+    """The impacting sphere: `radius` [m], approach `velocity` v0 [m/s], `mass` m0 [kg]."""
+
+    radius: float
+    velocity: float
+    material: Material
+    mass: float
+
+
+@dataclass(frozen=True)
+class RigidPlate:
+    """A rigid, immovable target with a flat elastic contact face of `material`."""
+
+    material: Material
+    kind: str = field(default="rigid-plate", init=False)
+
+
+@dataclass(frozen=True)
+class Beam:
+    """Euler-Bernoulli beam of rectangular section hit on its top face.
+
+    `length`, `width`, `height` [m] (height = depth in the impact direction), `impact_at` is the
+    fraction of the length from x = 0 (the clamped end of a cantilever), `modes` the mode count
+    (None = chosen automatically to meet the tolerance).
+    """
+
+    material: Material
+    support: str
+    length: float
+    width: float
+    height: float
+    impact_at: float
+    modes: int | None = None
+    kind: str = field(default="beam", init=False)
+
+    @property
+    def area(self) -> float:
+        """Cross-section area A [m^2]."""
+        return self.width * self.height
+
+    @property
+    def second_moment(self) -> float:
+        """Second moment of area I [m^4] for bending in the impact direction."""
+        return self.width * self.height**3 / 12.0
+
+    @property
+    def impact_x(self) -> float:
+        """Impact position x [m] from x = 0."""
+        return self.impact_at * self.length
+
+
+@dataclass(frozen=True)
+class ModalTarget:
+    """A structure given by its modes: `omega` [rad/s], `modal_mass` [kg] (max-normalised
+    shapes), `phi` (shape value at the impact point, dimensionless)."""
+
+    material: Material
+    omega: tuple[float, ...]
+    modal_mass: tuple[float, ...]
+    phi: tuple[float, ...]
+    kind: str = field(default="modal", init=False)
+
+
+Target = RigidPlate | Beam | ModalTarget
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A ball hitting a target. `name` is the catalogue name (file stem) or given name."""
+
+    name: str
+    ball: Ball
+    target: Target
+    description: str = ""
+    tags: tuple[str, ...] = ()
+    source: str = ""
+
+    @property
+    def e_star(self) -> float:
+        """Contact modulus E* [Pa]: 1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2."""
+        m1, m2 = self.ball.material, self.target.material
+        return 1.0 / ((1 - m1.poisson**2) / m1.young + (1 - m2.poisson**2) / m2.young)
+
+    @property
+    def alpha(self) -> float:
+        """Hertz coefficient alpha [N/m^1.5], ball on a flat face (paper eq. 20)."""
+        return 4.0 / 3.0 * self.e_star * math.sqrt(self.ball.radius)
+
+
+# ----------------------------------------------------------------------------- validation helpers
+
+def _where(src: str, section: str) -> str:
+    return f"{src}: [{section}]" if section else f"{src}:"
+
+
+def _positive(src: str, section: str, key: str, value: Any, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise SceneError(f"{_where(src, section)} {key} must be a positive finite number in {unit}, got {value!r}.")
+    return float(value)
+
+
+def _check_keys(src: str, section: str, table: Mapping[str, Any], required: set[str], optional: set[str]) -> None:
+    if not isinstance(table, Mapping):
+        raise SceneError(f"{_where(src, section)} must be a table, got {type(table).__name__}.")
+    unknown = set(table) - required - optional
+    if unknown:
+        allowed = ", ".join(sorted(required | optional))
+        raise SceneError(f"{_where(src, section)} unknown key {sorted(unknown)[0]!r}; allowed keys: {allowed}.")
+    missing = required - set(table)
+    if missing:
+        raise SceneError(f"{_where(src, section)} missing required key {sorted(missing)[0]!r}.")
+
+
+def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
+    mats = dict(BUILTIN_MATERIALS)
+    extra = doc.get("materials", {})
+    if not isinstance(extra, Mapping):
+        raise SceneError(f"{src}: [materials] must be a table of [materials.NAME] tables.")
+    for name, table in extra.items():
+        sect = f"materials.{name}"
+        _check_keys(src, sect, table, {"young", "poisson", "density"}, set())
+        nu = table["poisson"]
+        if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
+            raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
+        mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
+                              _positive(src, sect, "density", table["density"], "kg/m^3"))
+    return mats
+
+
+def _material(src: str, section: str, value: Any, mats: Mapping[str, Material]) -> Material:
+    if not isinstance(value, str) or value not in mats:
+        raise SceneError(f"{_where(src, section)} material {value!r} is unknown; known: {', '.join(sorted(mats))} "
+                         f"(or define it in a [materials.NAME] table with young, poisson, density).")
+    return mats[value]
+
+
+def _float_list(src: str, key: str, value: Any) -> tuple[float, ...]:
+    if not isinstance(value, list) or not value:
+        raise SceneError(f"{src}: [target] {key} must be a non-empty list of numbers, got {value!r}.")
+    out = []
+    for i, v in enumerate(value):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SceneError(f"{src}: [target] {key}[{i}] must be a finite number, got {v!r}.")
+        out.append(float(v))
+    return tuple(out)
+
+
+def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_name: str = "scene") -> Scene:
+    """Build and validate a Scene from a parsed TOML document (a mapping)."""
+    src = source
+    _check_keys(src, "", doc, {"ball", "target"}, {"name", "description", "tags", "materials"})
+    mats = _materials(src, doc)
+
+    b = doc["ball"]
+    _check_keys(src, "ball", b, {"radius", "velocity", "material"}, {"mass"})
+    bmat = _material(src, "ball", b["material"], mats)
+    radius = _positive(src, "ball", "radius", b["radius"], "m")
+    velocity = _positive(src, "ball", "velocity", b["velocity"], "m/s")
+    mass = (_positive(src, "ball", "mass", b["mass"], "kg") if "mass" in b
+            else bmat.density * 4.0 / 3.0 * math.pi * radius**3)
+    ball = Ball(radius, velocity, bmat, mass)
+
+    t = doc["target"]
+    if not isinstance(t, Mapping):
+        raise SceneError(f"{src}: [target] must be a table.")
+    kind = t.get("kind")
+    if kind not in TARGET_KINDS:
+        raise SceneError(f"{src}: [target] kind must be one of {', '.join(map(repr, TARGET_KINDS))}, got {kind!r}.")
+    target: Target
+    if kind == "rigid-plate":
+        _check_keys(src, "target", t, {"kind", "material"}, set())
+        target = RigidPlate(_material(src, "target", t["material"], mats))
+    elif kind == "beam":
+        _check_keys(src, "target", t, {"kind", "material", "support", "length", "width", "height", "impact_at"},
+                    {"modes"})
+        if t["support"] not in SUPPORTS:
+            raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
+                             f"got {t['support']!r}.")
+        at = t["impact_at"]
+        if isinstance(at, bool) or not isinstance(at, (int, float)) or not math.isfinite(at) or not 0.0 < at <= 1.0:
+            raise SceneError(f"{src}: [target] impact_at must be a fraction of the length in (0, 1] "
+                             f"(0 < impact_at < 1 for a beam supported at both ends), got {at!r}.")
+        if at >= 1.0 and t["support"] != "cantilever":
+            raise SceneError(f"{src}: [target] impact_at = {at!r} is on a support of a {t['support']} beam; "
+                             f"use a value strictly between 0 and 1.")
+        modes = t.get("modes")
+        if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 100000):
+            raise SceneError(f"{src}: [target] modes must be a whole number from 1 to 100000 (or omitted for an "
+                             f"automatic choice), got {modes!r}.")
+        target = Beam(_material(src, "target", t["material"], mats), t["support"],
+                      _positive(src, "target", "length", t["length"], "m"),
+                      _positive(src, "target", "width", t["width"], "m"),
+                      _positive(src, "target", "height", t["height"], "m"), float(at), modes)
+    else:
+        _check_keys(src, "target", t, {"kind", "material", "omega", "modal_mass", "phi"}, set())
+        omega = _float_list(src, "omega", t["omega"])
+        mm = _float_list(src, "modal_mass", t["modal_mass"])
+        phi = _float_list(src, "phi", t["phi"])
+        if not len(omega) == len(mm) == len(phi):
+            raise SceneError(f"{src}: [target] omega, modal_mass and phi must have equal lengths, got "
+                             f"{len(omega)}, {len(mm)} and {len(phi)}.")
+        for key, arr in (("omega", omega), ("modal_mass", mm)):
+            bad = [v for v in arr if v <= 0]
+            if bad:
+                raise SceneError(f"{src}: [target] {key} values must be positive, got {bad[0]!r}.")
+        target = ModalTarget(_material(src, "target", t["material"], mats), omega, mm, phi)
+
+    name = doc.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise SceneError(f"{src}: name must be a non-empty string, got {name!r}.")
+    desc = doc.get("description", "")
+    if not isinstance(desc, str):
+        raise SceneError(f"{src}: description must be a string, got {desc!r}.")
+    tags = doc.get("tags", [])
+    if not isinstance(tags, list) or not all(isinstance(x, str) for x in tags):
+        raise SceneError(f"{src}: tags must be a list of strings, got {tags!r}.")
+    return Scene(name, ball, target, desc, tuple(tags), source)
+
+
+def catalogue_names() -> list[str]:
+    """Names of the built-in scenes (file stems under scenarios/catalogue)."""
+    return sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml"))
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path."""
+    text_name = str(name_or_path)
+    path = Path(text_name)
+    if not (text_name.endswith(".toml") or path.exists()):
+        cand = CATALOGUE_DIR / f"{text_name}.toml"
+        if not cand.exists():
+            raise SceneError(f"no scene named {text_name!r}: not a file and not in the catalogue "
+                             f"(known: {', '.join(catalogue_names())}).")
+        path = cand
+    if not path.is_file():
+        raise SceneError(f"{path}: file does not exist (give a catalogue name or a path to a .toml scene file).")
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise SceneError(f"{path}: malformed TOML: {err}.") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise SceneError(f"{path}: cannot read the file: {err}.") from None
+    return scene_from_dict(doc, source=str(path), default_name=path.stem)
+
+
+def load_catalogue(tag: str | None = None) -> list[Scene]:
+    """All catalogue scenes, optionally only those carrying `tag`."""
+    scenes = [load_scene(n) for n in catalogue_names()]
+    return [s for s in scenes if tag is None or tag in s.tags]

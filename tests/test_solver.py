@@ -1,0 +1,61 @@
+"""The Volterra solver against the closed form and the independent ODE form (issue 8 bars)."""
+import numpy as np
+import pytest
+
+import impactval
+from impactval.reference.hertz import plate_impact
+from impactval.reference.ode import solve_ode
+from impactval.reference.solve import structure_modes
+
+
+def test_plate_matches_closed_form_to_1e8():
+    scene = impactval.load_scene("plate_steel")
+    p = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    r = impactval.solve(scene, tol=1e-9)
+    err = r.metrics.relative_to(p)
+    assert max(abs(err.t_m), abs(err.f_m), abs(err.delta_m)) <= 1e-8
+    # the self-reported bound holds
+    assert abs(r.t_m - p.t_m) <= r.uncertainty.t_m
+    assert abs(r.f_m - p.f_m) <= r.uncertainty.f_m
+    assert abs(r.delta_m - p.delta_m) <= r.uncertainty.delta_m
+    # the curve follows the closed form
+    inside = r.t <= p.t_m
+    assert np.allclose(r.delta[inside], p.delta(r.t[inside]), atol=1e-8 * p.delta_m)
+    assert r.rebound_velocity == pytest.approx(scene.ball.velocity, rel=1e-8)
+
+
+@pytest.mark.parametrize("name,modes", [("modal_two_mode", None), ("beam_ss_midspan", 12),
+                                        ("beam_cantilever_tip", 10), ("beam_ss_quarter", 16),
+                                        ("heavy_ball_slender_beam", 8)])
+@pytest.mark.parametrize("tol", [1e-6, 1e-8])
+def test_ode_form_agrees_within_reported_uncertainty(name, modes, tol):
+    scene = impactval.load_scene(name)
+    md = structure_modes(scene, modes)
+    truth, _ = solve_ode(md, scene.ball.mass, scene.alpha, scene.ball.velocity, rtol=1e-13, atol=1e-15)
+    r = impactval.solve(scene, tol=tol, modes=modes)
+    for key in ("t_m", "f_m", "delta_m"):
+        err = abs(getattr(r, key) - getattr(truth, key))
+        unc = getattr(r.uncertainty, key)
+        assert err <= unc, f"{key}: error {err:.3g} > reported uncertainty {unc:.3g}"
+        assert unc <= tol * getattr(r, key)
+
+
+def test_recontacts_agree_with_ode():
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    md = structure_modes(scene, 6)
+    window = 3e-3
+    _, info = solve_ode(md, scene.ball.mass, scene.alpha, scene.ball.velocity, rtol=1e-12, atol=1e-14,
+                        window=window)
+    r = impactval.solve(scene, tol=1e-8, modes=6, window=window)
+    assert len(r.contacts) >= 2, "this scene is in the catalogue for its re-contacts"
+    assert len(r.contacts) == len(info["ends"])
+    for c, s, e in zip(r.contacts, info["starts"], info["ends"]):
+        assert c.t_start == pytest.approx(s, abs=1e-9)
+        assert c.t_end == pytest.approx(e, abs=1e-9)
+
+
+def test_energy_converges_and_is_conserved_at_tight_tolerance():
+    scene = impactval.load_scene("beam_ss_midspan")
+    errs = [impactval.solve(scene, tol=tol, modes=20).energy_error for tol in (1e-5, 1e-7, 1e-9)]
+    assert errs[0] > errs[1] > errs[2]
+    assert impactval.solve(scene, tol=1e-10, modes=20).energy_error <= 1e-9
