@@ -63,7 +63,9 @@ class LinearSystem:
 
 def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     """Build and diagonalise the ball + modes system in contact (spring `k` [N/m], ball `mass` [kg])."""
-    keep = np.abs(modes.phi) > 1e-12
+    # modes with |phi| <= 1e-8 at the impact point (nodes, e.g. even modes at mid-span, up to rounding)
+    # contribute ~phi^2 <= 1e-16 relative and would put roots of the secular equation on its poles
+    keep = np.abs(modes.phi) > 1e-8
     omega = np.asarray(modes.omega, float)[keep]
     phi = np.asarray(modes.phi, float)[keep]
     mm = np.asarray(modes.modal_mass, float)[keep]
@@ -71,15 +73,81 @@ def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     ks = k / (1.0 + k * R)
     b = np.concatenate(([1.0], -phi))
     mass_diag = np.concatenate(([mass], mm))
-    K = ks * np.outer(b, b)
-    K[np.arange(1, len(b)), np.arange(1, len(b))] += mm * omega**2
-    # scale coordinates by sqrt(mass) so the problem is a standard symmetric one (better conditioned)
-    s = 1.0 / np.sqrt(mass_diag)
-    lam, V = linalg.eigh(K * s[:, None] * s[None, :])
-    if np.any(lam <= 0):
+    sq = np.sqrt(mass_diag)
+    bt = b / sq                               # b in mass-scaled coordinates
+    d = np.concatenate(([0.0], omega**2))
+    order = np.argsort(d)
+    ds = d[order]
+    if len(ds) > 1 and np.any(np.diff(ds) <= 1e-12 * ds[1:]):
+        # repeated frequencies: the rank-one structure is degenerate; dense solver
+        lam, V = linalg.eigh(np.diag(d) + ks * np.outer(bt, bt))
+        if np.any(lam <= 0):
+            raise ImpactvalError("linear theory: the contact system is not positive definite (check k and modes).")
+        U = V / sq[:, None]
+        return LinearSystem(np.sqrt(lam), U, (b @ U) / (1.0 + k * R), mass_diag, omega, phi, float(k), R)
+    lam, V, bv = _secular(ds, bt[order] ** 2, ks)
+    Vfull = np.empty_like(V)
+    Vfull[order] = V * np.sign(bt[order])[:, None]
+    U = Vfull / sq[:, None]                   # M-orthonormal: U^T M U = I
+    return LinearSystem(np.sqrt(lam), U, bv / (1.0 + k * R), mass_diag, omega, phi, float(k), R)
+
+
+def _secular(d: np.ndarray, beta2: np.ndarray, ks: float):
+    """Eigenpairs of diag(d) + ks * b b^T (d ascending, distinct; beta2 = b^2 > 0) from the secular
+    equation 1 + ks * sum_j beta2_j / (d_j - lam) = 0 (the paper's characteristic equation, eq. 60-62).
+
+    Each root lies in (d_k, d_k+1) (the last above d_n); it is found by bisection in mu = lam - d_o
+    measured from the nearer pole d_o, so every d_j - lam = (d_j - d_o) - mu keeps full relative
+    accuracy. Eigenvectors v_j = C b_j/(d_j - lam) (for |b| components; signs restored by the caller),
+    C = 1/sqrt(sum beta2/(d - lam)^2), and b.v = -C/ks exactly. A dense eigh loses absolute accuracy
+    ~ eps * max(d) in the low eigenvalues, which matters with thousands of beam modes; this does not.
+    Returns (lam, V with |b| instead of b, b.v).
+    """
+    n1 = len(d)
+    hi_gap = np.append(np.diff(d), ks * float(np.sum(beta2)))    # last root in (d_n, d_n + ks |b|^2]
+    out_lam = np.empty(n1)
+    V = np.empty((n1, n1))
+    bv = np.empty(n1)
+    chunk = max(1, int(4e6 // n1))
+    for c0 in range(0, n1, chunk):
+        ks_ = np.arange(c0, min(c0 + chunk, n1))
+        gap = hi_gap[ks_]
+        last = ks_ == n1 - 1
+
+        def g(origin_idx, mu):
+            diff = (d[:, None] - d[origin_idx][None, :]) - mu[None, :]
+            return 1.0 + ks * np.sum(beta2[:, None] / diff, axis=0), diff
+
+        # which half: left pole (origin k, mu in (0, gap/2]) or right pole (origin k+1, mu in [-gap/2, 0))
+        mid_val, _ = g(ks_, 0.5 * gap)
+        left = (mid_val >= 0) | last
+        origin = np.where(left, ks_, np.minimum(ks_ + 1, n1 - 1))
+        lo = np.where(left, 0.0, -0.5 * gap)
+        hi = np.where(left, np.where(last, gap, 0.5 * gap), 0.0)
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            val, _ = g(origin, mid)
+            pos = val > 0
+            hi = np.where(pos, mid, hi)
+            lo = np.where(pos, lo, mid)
+            if np.all((hi - lo) <= 4e-16 * np.maximum(np.abs(hi), np.abs(lo)) + 1e-300):
+                break
+        mu = 0.5 * (lo + hi)
+        for _ in range(6):      # safeguarded Newton: polish the last bits
+            val, diff = g(origin, mu)
+            slope = ks * np.sum(beta2[:, None] / diff**2, axis=0)
+            mu = np.clip(mu - val / slope, lo, hi)
+        _, diff = g(origin, mu)
+        # guard against an exact hit of a pole (cannot happen with beta2 > 0, but keep finite)
+        diff = np.where(diff == 0.0, np.finfo(float).tiny, diff)
+        Vc = np.sqrt(beta2)[:, None] / diff
+        C = 1.0 / np.sqrt(np.sum(Vc**2, axis=0))
+        V[:, ks_] = Vc * C
+        bv[ks_] = -C / ks
+        out_lam[ks_] = d[origin] + mu
+    if np.any(out_lam <= 0):
         raise ImpactvalError("linear theory: the contact system is not positive definite (check k and modes).")
-    U = V * s[:, None]                       # M-orthonormal: U^T M U = I
-    return LinearSystem(np.sqrt(lam), U, (b @ U) / (1.0 + k * R), mass_diag, omega, phi, float(k), R)
+    return out_lam, V, bv
 
 
 @dataclass(frozen=True)
@@ -115,6 +183,13 @@ def _state(sysm: LinearSystem, ph: _Phase, tau: float) -> tuple[np.ndarray, np.n
     z = sysm.U @ (ph.c * cp + ph.s * sp)
     zd = sysm.U @ (sysm.p * (ph.s * cp - ph.c * sp))
     return z, zd
+
+
+def _states(sysm: LinearSystem, ph: _Phase, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """z, z' (rows) at t0 + tau for many tau (one matrix product each)."""
+    P = np.outer(tau, sysm.p)
+    cp, sp = np.cos(P), np.sin(P)
+    return (cp * ph.c + sp * ph.s) @ sysm.U.T, ((cp * ph.s - sp * ph.c) * sysm.p) @ sysm.U.T
 
 
 def _first_root(fun, h: float, tau_max: float, start: float = 0.0, sign: int = -1):
@@ -200,9 +275,8 @@ def solve_linear_modes(modes: Modes, mass: float, k: float, v0: float, window: f
         contacts.append(Contact(t_now, t_now + end, k * dp, dp))
         m = max(int(n_series * end / t_est), 50)
         tau = np.unique(np.concatenate((np.linspace(0.0, end, m + 1), [tp])))
-        for x in tau:
-            zz, zzd = _state(sysm, ph, float(x))
-            series.append((t_now + x, zz, zzd, True))
+        zz, zzd = _states(sysm, ph, tau)
+        series.append((t_now + tau, zz, zzd, np.ones(len(tau), bool)))
         z, zd = _state(sysm, ph, end)
         t_now += end
         if len(contacts) == 1:
@@ -222,21 +296,21 @@ def solve_linear_modes(modes: Modes, mass: float, k: float, v0: float, window: f
         start, _, _ = _first_root(gap, h, t_stop - t_now, start=0.0, sign=+1)
         span = (start if start is not None else t_stop - t_now)
         m = max(int(n_series * span / t_est), 50)
-        for x in np.linspace(0.0, span, m + 1)[1:]:
-            cw, sw = np.cos(w * x), np.sin(w * x)
-            zz = np.concatenate(([x10 + u * x], q0 * cw + qd0 * sw / w))
-            zzd = np.concatenate(([u], -q0 * w * sw + qd0 * cw))
-            series.append((t_now + x, zz, zzd, False))
+        x = np.linspace(0.0, span, m + 1)[1:]
+        cw, sw = np.cos(np.outer(x, w)), np.sin(np.outer(x, w))
+        zz = np.column_stack((x10 + u * x, q0 * cw + qd0 * sw / w))
+        zzd = np.column_stack((np.full(len(x), u), -q0 * w * sw + qd0 * cw))
+        series.append((t_now + x, zz, zzd, np.zeros(len(x), bool)))
         if start is None:
             break
         t_now += start
         cw, sw = np.cos(w * start), np.sin(w * start)
         z = np.concatenate(([x10 + u * start], q0 * cw + qd0 * sw / w))
         zd = np.concatenate(([u], -q0 * w * sw + qd0 * cw))
-    t = np.array([s[0] for s in series])
-    Z = np.array([s[1] for s in series])
-    Zd = np.array([s[2] for s in series])
-    inside = np.array([s[3] for s in series])
+    t = np.concatenate([s[0] for s in series])
+    Z = np.vstack([s[1] for s in series])
+    Zd = np.vstack([s[2] for s in series])
+    inside = np.concatenate([s[3] for s in series])
     gap_ = Z[:, 0] - Z[:, 1:] @ sysm.phi
     delta = np.where(inside, gap_ / (1.0 + k * sysm.R), gap_)
     f = np.where(inside, k * np.maximum(delta, 0.0), 0.0)
@@ -278,7 +352,7 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
     modes : int, optional
         Beam mode count (as in :func:`impactval.solve`): explicit = exactly n modes, no residual;
         None with no count in the scene = automatic (n modes + residual static flexibility,
-        doubled until n and 2n agree to `tol`).
+        doubled until twice the n-vs-2n difference is <= `tol`; that is the reported uncertainty).
     stiffness : float, optional
         Contact spring k [N/m]; default k0 = (4/5) alpha delta_m^(1/2) of the rigid-plate impact.
     window : float
@@ -305,7 +379,9 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
             run = solve_linear_modes(structure_modes(scene, n, residual=True), mass, k, v0, window)
             if prev is not None:
                 a, b = prev[0].metrics, run.metrics
-                trunc = Metrics(abs(a.t_m - b.t_m), abs(a.f_m - b.f_m), abs(a.delta_m - b.delta_m))
+                # x2 the n-vs-2n difference: covers an error falling like 1/n (measured on beam_ss_midspan:
+                # the 192-mode error is 1.2x the 192-vs-384 difference)
+                trunc = Metrics(2 * abs(a.t_m - b.t_m), 2 * abs(a.f_m - b.f_m), 2 * abs(a.delta_m - b.delta_m))
                 rel = max(trunc.t_m / a.t_m, trunc.f_m / a.f_m, trunc.delta_m / a.delta_m)
                 if rel <= tol or n >= 4096:
                     run, n = prev
