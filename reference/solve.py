@@ -133,11 +133,40 @@ def levels(n_steps: float, tol: float) -> int:
     return int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 3), 30))
 
 
-def _estimate(fine: Metrics, coarse: Metrics) -> Metrics:
+#: a mode is resolved by the base step H when omega H <= RESOLVED_PHASE
+RESOLVED_PHASE = 2.0
+#: |effect of one mode (dynamic) - its static flexibility| <= UNRESOLVED_COEFF s w^-3.5, relative, on
+#: t_m, f_m, delta_m (s = (m0/m) phi^2, w = omega delta_m/v0); measured ratio <= 2.0 for w = 5..80
+#: (tests/test_convergence.py::test_single_mode_dynamic_effect_bound)
+UNRESOLVED_COEFF = 2.5
+
+
+def _mode_weights(omega: np.ndarray, g: np.ndarray, mass: float, plate) -> np.ndarray:
+    """UNRESOLVED_COEFF s_j w_j^-3.5 per mode (g = phi^2/(m omega), so s = m0 g omega)."""
+    w = omega * plate.delta_m / plate.v0
+    return UNRESOLVED_COEFF * mass * g * omega * w**-3.5
+
+
+def unresolved_bound(s_w: np.ndarray, omega: np.ndarray, H: float) -> float:
+    """Relative error bound from the modes the base step H does not resolve well (omega H ~> 1).
+
+    They are still integrated (exactly, for the interpolated force), but the force's fast ringing
+    they cause is aliased by the interpolation; their whole dynamic effect beyond a static spring
+    bounds that error.
+    """
+    if not len(omega):
+        return 0.0
+    # a mode with phase omega H per step is aliased in proportion to the interpolation error of
+    # its ringing, ~(omega H)^6: weight (omega H / RESOLVED_PHASE)^6, capped at its whole effect
+    return float(np.sum(s_w * np.minimum(1.0, (omega * H / RESOLVED_PHASE) ** 6)))
+
+
+def _estimate(fine: Metrics, coarse: Metrics, unresolved: float = 0.0) -> Metrics:
     """Time-step uncertainty of `fine`. One relative bound for all three metrics (the largest of the
-    three Richardson estimates): a single metric's estimate can vanish where its error changes sign."""
+    three Richardson estimates): a single metric's estimate can vanish where its error changes sign;
+    plus the bound for modes the step does not resolve."""
     rel = max(abs(fine.t_m - coarse.t_m) / fine.t_m, abs(fine.f_m - coarse.f_m) / fine.f_m,
-              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0)
+              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0) + unresolved
     return Metrics(rel * fine.t_m, rel * fine.f_m, rel * fine.delta_m)
 
 
@@ -155,6 +184,10 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2
     n = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    # and resolve enough modes that those the step does not resolve stay within tol / 4
+    s_w = _mode_weights(omega, g, mass, plate)
+    while unresolved_bound(s_w, omega, plate.t_m / n) > tol / 4 and n < 1e6:
+        n *= 1.1
     for _ in range(12):
         H = plate.t_m / n
         J = levels(n, tol)
@@ -173,7 +206,7 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
         m_fine = Metrics(first.t_end - first.t_start, first.f_max, first.delta_max)
         c0 = coarse[0]
         m_coarse = Metrics(c0[1] - c0[0], alpha * c0[2] ** 1.5, c0[2])
-        unc = _estimate(m_fine, m_coarse)
+        unc = _estimate(m_fine, m_coarse, unresolved_bound(s_w, omega, H))
         ratio = _rel(unc, m_fine) / tol
         if ratio <= 1.0 or n > 1e6:
             break
