@@ -153,9 +153,10 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes):
+def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
-    and on for `window` [s] after it when window > 0 (re-contacts included).
+    and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
+    table level j + j0 (so one table set serves base steps H and H/2).
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
@@ -239,6 +240,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         # ---------------------------------------------------------------- attempt (halve on crossing)
         while True:
             eta = etas[j]
+            jt = j + j0
             first = count - p
             if first < seg_start:
                 first = seg_start
@@ -269,16 +271,16 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 c[l] = L[m, l]
             # pass 1: propagate every mode with the known part of the force (contiguous loops)
             for i in range(n):
-                er = Er[j, i]
-                ei = Ei[j, i]
+                er = Er[jt, i]
+                ei = Ei[jt, i]
                 pr[i] = er * yr[i] - ei * yi[i]
                 pi_[i] = er * yi[i] + ei * yr[i]
             for l in range(m + 1):
                 al = a_known[l]
                 if al != 0.0:
                     for i in range(n):
-                        pr[i] += Kr[j, l, i] * al
-                        pi_[i] += Ki[j, l, i] * al
+                        pr[i] += Kr[jt, l, i] * al
+                        pi_[i] += Ki[jt, l, i] * al
             acc = 0.0
             for i in range(n):
                 acc += pi_[i]
@@ -292,7 +294,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 wx += a_known[l] / ((l + 1) * (l + 2))
                 cu += c[l] / (l + 1)
                 cx += c[l] / ((l + 1) * (l + 2))
-                cs += c[l] * S[j, l]
+                cs += c[l] * S[jt, l]
             u_pre = u - eta * wu / m0
             x1_pre = x1 + u * eta - eta * eta * wx / m0
             B = eta * eta * cx / m0 + cs + R
@@ -315,8 +317,8 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             for l in range(m + 1):
                 cl = c[l]
                 for i in range(n):
-                    Kcr[i] += Kr[j, l, i] * cl
-                    Kci[i] += Ki[j, l, i] * cl
+                    Kcr[i] += Kr[jt, l, i] * cl
+                    Kci[i] += Ki[jt, l, i] * cl
             Kc_j = j
         emod = 0.0
         for i in range(n):
@@ -502,9 +504,9 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
     """
     Er, Ei, Kr, Ki, S = moments(omega, g, 2.0 * H, J + 1, p)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er[:-1], Ei[:-1], Kr[:-1], Ki[:-1], S[:-1], max_nodes)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 0)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
-                                        Er[1:], Ei[1:], Kr[1:], Ki[1:], S[1:], max_nodes)
+                                        Er, Ei, Kr, Ki, S, max_nodes, 1)
     if st != STATUS_OK or st_c != STATUS_OK:
         return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, np.zeros((0, 3)), np.zeros((0, 3))
     fine = contacts(t[:cnt], d[:cnt], fl[:cnt])

@@ -92,7 +92,7 @@ def _select_uncached(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float,
-              window: float = 0.0, J: int | None = None, tol: float = 1e-6, tables=None) -> Run:
+              window: float = 0.0, J: int | None = None, tol: float = 1e-6) -> Run:
     """One integration with base step H = t_plate / n_steps (t_plate: rigid-plate duration).
 
     `window` [s]: keep integrating this long after the first contact ends (re-contacts).
@@ -104,9 +104,7 @@ def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float
     if J is None:
         J = levels(n_steps, tol)
     omega, g, ew = _select(modes)
-    if tables is None:
-        tables = kernel.moments(omega, g, H, J, P_DEGREE)
-    Er, Ei, Kr, Ki, S = tables
+    Er, Ei, Kr, Ki, S = kernel.moments(omega, g, H, J, P_DEGREE)
     max_nodes = int(6 * n_steps + 60 * J + 50 + (2.5 * window / H if window > 0 else 0))
     for _ in range(8):
         status, cnt, t, d, f, x, u, e, flags = kernel.run(

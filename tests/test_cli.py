@@ -55,3 +55,16 @@ def test_core_never_imports_an_engine():
             "impactval.engines, impactval.engines.base; import sys; "
             "print(sorted({'mujoco', 'pybullet', 'exudyn', 'matplotlib'} & set(sys.modules)) or '')")
     assert run_py(code) == ""
+
+
+def test_first_run_says_it_compiles(tmp_path):
+    """With an empty numba cache the CLI says on stderr that it compiles (once)."""
+    import os
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    code = ("import impactval.cli as c; from impactval.reference import kernel; from pathlib import Path; "
+            "print(any(Path(kernel.solve_pair._cache._cache_path).glob('kernel.solve_pair-*.nbi')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert out.stdout.strip() == "False"
+    warn = subprocess.run([sys.executable, "-c", "import impactval.cli as c; c._warn_if_compiling()"],
+                          capture_output=True, text=True, env=env)
+    assert "compiling" in warn.stderr
