@@ -16,7 +16,7 @@ from scipy import linalg, optimize
 
 import impactval
 from impactval.engines.base import EngineSettings
-from impactval.engines.pybullet_ import PybulletAdapter
+from impactval.engines.pybullet_ import PybulletAdapter, default_segments
 from impactval.reference.beams import beam_modes
 from impactval.reference.hertz import plate_impact
 
@@ -119,13 +119,13 @@ def main() -> None:
         r = a.run(beam, EngineSettings(dt=fac * limit, segments=51))
         print(f"   dt = {fac:.2f} x limit ({fac * limit:.3g} s): {r.status} {r.message}")
 
-    print("\n== other supports (injected Hertz, N=101, dt=1e-7) ==")
-    for name in ("beam_ss_quarter", "beam_cc_midspan", "beam_cantilever_tip", "light_ball_heavy_beam",
-                 "heavy_ball_slender_beam"):
+    print("\n== other catalogue beams (injected Hertz, default segments) ==")
+    for name, dt in (("beam_ss_quarter", 1e-7), ("beam_cc_midspan", 1e-7), ("beam_cantilever_tip", 1e-7),
+                     ("light_ball_heavy_beam", 1e-7), ("light_ball_heavy_beam", 5e-8), ("heavy_ball_slender_beam", 1e-7)):
         s = impactval.load_scene(name)
         rs = impactval.solve(s)
-        line(name, a.run(s, EngineSettings(dt=1e-7, segments=101)), (rs.t_m, rs.f_m, rs.delta_m))
-
+        n = default_segments(s)
+        line(f"{name} N={n} dt={dt:g}", a.run(s, EngineSettings(dt=dt)), (rs.t_m, rs.f_m, rs.delta_m))
 
 if __name__ == "__main__":
     main()

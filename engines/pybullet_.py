@@ -75,17 +75,29 @@ MAX_LINKS = 127
 
 
 def default_segments(scene) -> int:
-    """Number of chain links for a beam scene when the settings leave it open.
+    """Number of chain links for a beam scene when the settings leave it open (0 for non-beams).
 
-    Documented default: 101 links (0 for targets that are not beams). Odd, so a mid-span impact
-    falls on the centre of a link (an even N puts it on a hinge, which is softer: N = 100 gives
-    +0.56 % in t_m where N = 101 gives -0.27 %). Measured on the worked case (injected Hertz,
-    dt = 1e-7): t_m -0.27 %, f_m +0.38 %, delta_m +0.25 %; simply supported chain frequencies of
-    modes 1-5 within 1e-6 of the continuum (clamped ends converge as 1/N^2: -0.05 % for mode 1
-    of a clamped-clamped chain at N = 81). The chain's stability limit is ~4.7e-7 s at N = 101.
-    A mode criterion may size it later: this is the single place to change.
+    Documented default: the N within DEFAULT_SEGMENTS +- 20 (and within PyBullet's link limit)
+    that puts the impact point nearest the centre of a link, ties broken by closeness to
+    DEFAULT_SEGMENTS = 101: mid-span -> 101, quarter point -> 102, x = 0.95 L -> 110. A point near a
+    hinge is softer and shifts the result by up to ~1 % (mid-span N = 100: t_m +0.56 % where
+    N = 101 gives -0.27 %); centred, the error is smooth in N. Measured (injected Hertz,
+    dt = 1e-7): worked case -0.27 / +0.38 / +0.25 % (t_m / f_m / delta_m), quarter point N = 102
+    -0.27 / +0.37 / +0.25 %, cantilever tip N = 110 -0.26 / +0.38 / +0.25 %. Simply supported
+    chain frequencies of modes 1-5 are within 1e-6 of the continuum at N = 101; clamped ends
+    converge as 1/N^2 (-0.05 % for mode 1 of a clamped-clamped chain at N = 81). The stability
+    limit of such a chain is ~4.7e-7 s. A mode criterion may size N later: this is the one place.
     """
-    return DEFAULT_SEGMENTS if getattr(scene.target, "kind", "") == "beam" else 0
+    target = scene.target
+    if getattr(target, "kind", "") != "beam":
+        return 0
+    most = MAX_LINKS - (1 if target.support in ("simply-supported", "clamped-clamped") else 0)
+    candidates = range(DEFAULT_SEGMENTS - 20, min(DEFAULT_SEGMENTS + 20, most) + 1)
+
+    def off_centre(n: int) -> float:
+        return round(abs((target.impact_at * n) % 1.0 - 0.5), 6)
+
+    return min(candidates, key=lambda n: (off_centre(n), abs(n - DEFAULT_SEGMENTS)))
 
 
 @dataclass(frozen=True)

@@ -214,10 +214,19 @@ def test_other_supports_run(adapter, name):
 
 
 def test_default_segments():
+    """The default puts each catalogue impact point at a link centre, near 101 links."""
     from impactval.engines.pybullet_ import DEFAULT_SEGMENTS, default_segments
+    from impactval.scenarios.scene import load_catalogue
 
     assert default_segments(impactval.load_scene("beam_ss_midspan")) == DEFAULT_SEGMENTS == 101
+    assert default_segments(impactval.load_scene("beam_ss_quarter")) == 102
+    assert default_segments(impactval.load_scene("beam_cantilever_tip")) == 110
     assert default_segments(impactval.load_scene("plate_steel")) == 0
+    for s in load_catalogue():
+        if s.target.kind == "beam":
+            n = default_segments(s)
+            assert 81 <= n <= 126
+            assert abs((s.target.impact_at * n) % 1.0 - 0.5) < 1e-6, s.name
 
 
 # ---------------------------------------------------------------------------- bad input
