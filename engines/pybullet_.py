@@ -18,8 +18,9 @@ and damping. Measured pitfalls handled here: a link's collision shape sits in it
 (at the hinge), not its inertial frame, so the box is shifted by h/2 (else sphere-box depths are
 off by microns); `getLinkState` without computeForwardKinematics returns the previous step's
 frame (a one-step lag in the contact point: +0.3 % in f_m at N = 51); createMultiBody silently
-keeps at most 127 links; a JOINT_POINT2POINT pivot is given in the link's inertial frame. The penetration is measured from body positions before each step (Bullet's
-contactDistance is the pre-step value too), and the force of step k is paired with it.
+keeps at most 127 links; a JOINT_POINT2POINT pivot is given in the link's inertial frame.
+The penetration is measured from body positions before each step (Bullet's contactDistance is
+the pre-step value too), and the force of step k is paired with it.
 
 Contact modes
 - "hertz": the ball's collisions are filtered out; f = alpha * max(delta, 0)^1.5 from the current
@@ -33,7 +34,7 @@ Contact modes
   The force is the sum of Bullet's reported normal forces (cross-checked against the ball's
   momentum change in diagnostics["force_report_mismatch"]).
 - "native-hertz": the global route with globalCFM = E / (alpha sqrt(delta) dt) updated from the
-  current penetration every step, so the spring follows Hertz's tangent-secant k(delta).
+  current penetration every step: the secant stiffness alpha sqrt(delta), so f = alpha delta^1.5.
 
 Stability: Bullet steps multibodies with semi-implicit Euler, stable while omega_max dt < 2.
 omega_max of the linearised chain + ball + contact (tangent stiffness at the rigid-plate
@@ -173,7 +174,7 @@ def _parse_options(settings: EngineSettings) -> _Options:
     unknown = set(opts) - known
     if unknown:
         raise EngineError(f"pybullet: unknown option {sorted(unknown)[0]!r}; known options: "
-                          f"native_route ({' | '.join(NATIVE_ROUTES)}), contact_erp (number > 1).")
+                          f"native_route ({' | '.join(NATIVE_ROUTES)}), contact_erp (positive number).")
     route = opts.get("native_route", "global")
     if route not in NATIVE_ROUTES:
         raise EngineError(f"pybullet: option native_route must be one of {', '.join(NATIVE_ROUTES)}, got {route!r}.")
@@ -270,6 +271,8 @@ def _build_chain(c: _Client, beam, n: int) -> _Chain:
     support = beam.support
     roller = support in ("simply-supported", "clamped-clamped")
     most = MAX_LINKS - (1 if roller else 0)
+    if n < 2:
+        raise EngineError(f"pybullet: segments must be at least 2 for a beam, got {n}.")
     if n > most:
         raise EngineError(f"pybullet: segments must be at most {most} for a {support} beam (PyBullet keeps at most "
                           f"{MAX_LINKS} links per multibody, the roller takes one), got {n}.")
@@ -371,8 +374,6 @@ def _run(c: _Client, scene, settings: EngineSettings, opts: _Options, n_segments
     target = scene.target
     chain = None
     if target.kind == "beam":
-        if n_segments < 2:
-            raise EngineError(f"pybullet: segments must be at least 2 for a beam, got {n_segments}.")
         chain = _build_chain(c, target, n_segments)
         target_body = chain.body
         surface_z = target.height / 2
