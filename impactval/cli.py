@@ -14,16 +14,22 @@ import click
 from impactval.errors import ImpactvalError
 
 
-def _fmt(x: float, unit: str, scale: float) -> str:
-    return "n/a" if not math.isfinite(x) else f"{x * scale:.6f} {unit}"
+def _pm(value: float, unc: float) -> str:
+    """'value ± uncertainty' with the value to the uncertainty's second significant digit."""
+    if not math.isfinite(value):
+        return "n/a"
+    if not unc > 0:
+        return f"{value:.9g}"
+    digits = max(0, min(12, 1 - math.floor(math.log10(unc))))
+    return f"{value:.{digits}f} ± {unc:.1g}"
 
 
 def _warn_if_compiling() -> None:
     from impactval.reference import kernel
 
     try:
-        path = Path(kernel.run._cache._cache_path)
-        cached = any(path.glob("kernel.run-*.nbi"))
+        path = Path(kernel.solve_pair._cache._cache_path)
+        cached = any(path.glob("kernel.solve_pair-*.nbi"))
     except Exception:  # noqa: BLE001 - only a hint
         cached = True
     if not cached:
@@ -75,8 +81,8 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     scenes_ = [impactval.load_scene(n) for n in names]
     _warn_if_compiling()
     if not as_json:
-        click.echo(f"{'scene':26s} {'t_m [us]':>14s} {'f_m [N]':>14s} {'delta_m [um]':>14s} "
-                   f"{'rel. unc.':>9s} {'modes':>5s} {'contacts':>8s}")
+        click.echo(f"{'scene':24s} {'t_m [us]':>22s} {'f_m [N]':>24s} {'delta_m [um]':>22s} "
+                   f"{'modes':>5s} {'contacts':>8s}")
     for sc in scenes_:
         r = impactval.solve(sc, tol=tol, window=window)
         u = r.uncertainty
@@ -86,9 +92,8 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
                                    "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
                                    "contacts": [c.__dict__ for c in r.contacts]}))
         else:
-            rel = max(u.t_m / r.t_m, u.f_m / r.f_m, u.delta_m / r.delta_m)
-            click.echo(f"{r.scene:26s} {r.t_m * 1e6:14.6f} {r.f_m:14.6f} {r.delta_m * 1e6:14.6f} "
-                       f"{rel:9.1e} {r.modes:5d} {len(r.contacts):8d}")
+            click.echo(f"{r.scene:24s} {_pm(r.t_m * 1e6, u.t_m * 1e6):>22s} {_pm(r.f_m, u.f_m):>24s} "
+                       f"{_pm(r.delta_m * 1e6, u.delta_m * 1e6):>22s} {r.modes:5d} {len(r.contacts):8d}")
         if curve:
             import numpy as np
 
