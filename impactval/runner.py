@@ -235,6 +235,11 @@ def _pct(x: Any) -> str:
     return "" if not math.isfinite(x) else f"{100 * x:+.3f}"
 
 
+def _pct_abs(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{100 * x:.3f}"
+
+
 def _ms(x: Any) -> str:
     x = _num(x)
     return "" if not math.isfinite(x) else f"{1e3 * x:.1f}"
@@ -250,7 +255,7 @@ def table_rows(df: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
         cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), f"{r['dt']:g}",
                       "" if seg in ("", None) or (isinstance(seg, float) and math.isnan(seg)) else str(seg),
                       str(r["status"]), _pct(r["err_t_m"]), _pct(r["err_f_m"]), _pct(r["err_delta_m"]),
-                      _pct(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
+                      _pct_abs(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
                       _pct(r["lin_err_delta_m"]), _ms(r["wall_time_build_s"]), _ms(r["wall_time_step_s"]),
                       str(int(r["n_steps"])) if math.isfinite(_num(r["n_steps"])) else ""])
     return header, cells
