@@ -82,6 +82,26 @@ def _unavailable(spec: str, scene, settings: EngineSettings) -> ImpactResult | N
     return None
 
 
+def _check_settings_somewhere(specs: list[str], settings: EngineSettings) -> None:
+    """Bad input fails fast: settings that no requested (loadable) engine accepts are an error
+    (e.g. a misspelt integrator); settings only some engines accept become "skipped" rows."""
+    from impactval.engines.base import load_adapter
+
+    errors = []
+    for spec in specs:
+        try:
+            adapter = load_adapter(spec)
+        except Exception:  # noqa: BLE001 - a missing or broken adapter is reported as its row
+            return
+        try:
+            adapter.check_settings(settings)
+            return
+        except EngineError as err:
+            errors.append(str(err))
+    if errors:
+        raise EngineError(errors[0] if len(errors) == 1 else "no engine accepts these settings: " + " ".join(errors))
+
+
 def _linear_reference(scene, tol: float, stiffness: float):
     """The linear-theory reference for the same spring, or None when impactval.reference.linear
     is not available in this version."""
@@ -193,6 +213,7 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     over = {k: v for k, v in dict(dt=dt, contact=contact, integrator=integrator, segments=segments,
                                   timeout_s=timeout_s).items() if v is not None}
     settings = replace(base, **over)
+    _check_settings_somewhere(specs, settings)
     scene_objs = [_as_scene(s) for s in scenes]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")

@@ -102,3 +102,17 @@ def test_cli_run_writes_files_and_exit_codes(tmp_path):
     assert res.exit_code == 1
     with (out / "results.csv").open() as fh:
         assert [r["status"] for r in csv.DictReader(fh)] == ["ok", "crashed"]      # appended
+
+
+@requires_mujoco
+def test_settings_no_engine_accepts_are_bad_input():
+    with pytest.raises(EngineError, match="unknown integrator 'euler'"):
+        run(["plate_steel"], ["mujoco"], integrator="euler")
+    res = CliRunner().invoke(impactval.cli.main, ["run", "plate_steel", "--integrator", "rk4"])
+    assert res.exit_code == 2 and "unknown integrator 'rk4'" in res.output
+
+
+@requires_mujoco
+def test_unsupported_scene_is_a_skipped_row():
+    df = run(["modal_two_mode"], ["mujoco"], contact="native")
+    assert list(df["status"]) == ["skipped"] and "modal target" in df["message"][0]
