@@ -361,6 +361,7 @@ class MujocoAdapter(EngineAdapter):
         if lay.kind == "beam":
             diagnostics.update(self.structure_frequencies(scene, settings, model))
             diagnostics["segments"] = lay.n_segments
+            diagnostics["rotary_inertia"] = settings.option("rotary_inertia", "section")
         build_s = time.perf_counter() - t0
 
         plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
