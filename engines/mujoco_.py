@@ -10,10 +10,10 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
   m*(l^2 + h^2)/12 of a real beam piece (option rotary_inertia = "section", the default) or
   m*l^2/12 (rotary_inertia = "none": pure Euler-Bernoulli, like the reference). The section's
   rotary inertia lowers the chain's highest frequency, so N = 81 runs at dt = 1e-6 with Euler
-  (without it Euler needs dt < ~0.6 us), at the price of a small model difference (Rayleigh
-  beam: first three frequencies -0.02/-0.07/-0.15 %; worked-case impact ~0.3 % off E-B as
-  N grows). Neighbouring segments are joined by
-  hinges (axis y) of stiffness EI/l; a clamped end is a hinge to the ground of stiffness 2EI/l
+  (without it Euler needs dt < ~0.6 us), at the price of a model difference (Rayleigh beam:
+  first three frequencies -0.02/-0.07/-0.15 % on the worked case; up to ~1.3 % in t_m on a long
+  contact, see docs/mujoco.md). Neighbouring segments are joined by hinges (axis y) of
+  stiffness EI/l; a clamped end is a hinge to the ground of stiffness 2EI/l
   (the end curvature is lumped over half a segment). Supports: simply supported = a roller at
   x = 0 (slide x + free hinge) and a `<connect>` pin at x = L (a pin at both ends locks the
   chain); clamped-clamped = a roller with a 2EI/l hinge at x = 0 and, at x = L, a `<connect>`
@@ -31,15 +31,18 @@ Contact modes:
   to the ball and, opposite, to the target at the contact point;
 - "native": one explicit contact pair (condim 1) set to a linear, undamped spring of the paper's
   k0 = 0.8*alpha*sqrt(delta_m) (rigid-plate delta_m): direct solref = (-k0/m_eff, 0) with
-  m_eff = 1/efc_diagA of the contact row (exact diagonal) and a flat solimp (d0 = dwidth = 0.95);
+  m_eff = 1/efc_diagA of the contact row (exact diagonal, `diagexact`) and a flat solimp of
+  small impedance (d0 = dwidth = NATIVE_IMPEDANCE = 1e-4, see there why not MuJoCo's 0.9);
 - "native-hertz": the same pair with solref and the solimp shape fitted (least squares on the
-  static force law MuJoCo itself produces) to alpha*delta^1.5 over 0..1.2 delta_m; the fit's
-  RMS error is reported in diagnostics["native_hertz_fit_rms"].
+  static force law MuJoCo itself produces, on a plate with the scene's ball) to alpha*delta^1.5
+  over 0..1.2 delta_m, impedance <= 1e-3; the fit's RMS error is reported in diagnostics["native_hertz_fit_rms"].
 
 Series are sampled after every step at the new state (an extra `mj_forward`, not counted in the
 stepping wall time). Diagnostics of a beam: the chain's own first natural frequencies
-(`structure_frequencies`, from MuJoCo's linearised transition matrix, so supports, constraints
-and the integrator are as simulated) next to the continuum's (`continuum_frequencies`).
+(`structure_frequencies`, from MuJoCo's linearised transition matrix, so supports and soft
+constraints are as simulated) next to the continuum's (`continuum_frequencies`). Energy for
+Euler/implicitfast uses the mean of the half-step velocities around a sample (second order).
+The support constraints use solref = (2 dt, 1) (MuJoCo's default 0.02 s makes them springs).
 """
 from __future__ import annotations
 
@@ -82,7 +85,8 @@ def default_segments(scene) -> int:
     """Hencky chain segment count when settings.segments is None.
 
     81 segments: on the worked case (simply supported, mid-span) the chain's impact errors are
-    below ~1 % and its first three frequencies within 0.1 % of the continuum, at ~100 us/step.
+    at most 1.0 % and its first three frequencies within 0.2 % of the continuum, and Euler is
+    stable at dt = 1e-6 (with the default section rotary inertia).
     One function so a mode-based criterion can replace it.
     """
     return DEFAULT_SEGMENTS
@@ -123,8 +127,6 @@ def _beam_xml(beam, n: int, lay: _Layout, contact_geom: bool, rotary: str = "sec
     ixx = izz = m_seg * (l * l + w * w + h * h) / 12.0     # out of plane: never excited
     x_c = beam.impact_x
     hit = min(int(x_c / l), n - 1)
-    if beam.support == "cantilever" and hit == 0 and x_c == 0:
-        raise EngineError("impact_at = 0 is the clamped end of a cantilever; nothing moves there.")
     lay.kind, lay.n_segments, lay.segment_length = "beam", n, l
     lay.hinge_stiffness, lay.clamp_stiffness, lay.hit_segment = k_hinge, k_clamp, hit
     lay.top, lay.impact_x = h / 2.0, x_c
@@ -149,8 +151,6 @@ def _beam_xml(beam, n: int, lay: _Layout, contact_geom: bool, rotary: str = "sec
                          f'size="{_vec(l / 2, w / 2, h / 2)}" contype="0" conaffinity="0" mass="0"/>')
         parts.append("".join(s))
         closes.append("</body>")
-    if support == "simply-supported" and hit == n - 1 and n == 1:
-        raise EngineError("segments must be at least 2 for a simply supported beam.")
     chain = "".join(parts) + "".join(closes)
     extra = ""
     if support in ("simply-supported", "clamped-clamped"):
