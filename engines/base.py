@@ -263,6 +263,8 @@ def load_adapter(spec: str) -> EngineAdapter:
 def _child(spec: str, scene, settings: EngineSettings, conn) -> None:
     try:
         res = load_adapter(spec).run(scene, settings)
+    except EngineError as err:      # the scene/settings combination is not supported by this engine
+        res = ImpactResult.failed(scene.name, spec, "skipped", str(err), settings=settings.as_dict())
     except Exception as err:  # noqa: BLE001 - every failure must become a row
         tb = traceback.format_exc(limit=4)
         res = ImpactResult.failed(scene.name, spec, "crashed", f"{type(err).__name__}: {err}",

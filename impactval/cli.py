@@ -199,5 +199,53 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     click.echo(f"index: {theory_index(comparisons, out_dir)}")
 
 
+# ---------------------------------------------------------------------------- impactval run
+def _run_settings(dt, contact, integrator, segments, timeout, tail):
+    from impactval.engines.base import EngineSettings
+
+    return EngineSettings(dt=dt, contact=contact, integrator=integrator, segments=segments, timeout_s=timeout,
+                          tail=tail)
+
+
+@main.command(name="run")
+@click.argument("scene", nargs=-1)
+@click.option("--engines", "engines", default="mujoco", show_default=True,
+              help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
+@click.option("--dt", default=1e-6, show_default=True, type=float, help="Engine time step [s].")
+@click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]),
+              help="hertz: exact law injected; native: engine contact as the linear spring k0; "
+                   "native-hertz: engine contact shaped toward Hertz.")
+@click.option("--integrator", default=None, help="Engine integrator (e.g. MuJoCo: Euler, implicitfast, RK4).")
+@click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
+@click.option("--timeout", default=600.0, show_default=True, type=float, help="Time limit per engine job [s].")
+@click.option("--tail", default=0.0, show_default=True, type=float,
+              help="Simulated time [s] after the first contact ends (re-contacts).")
+@click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
+@click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
+              help="Directory for results.csv (rows appended as they finish) and report.md.")
+def run_command(scene, engines, dt, contact, integrator, segments, timeout, tail, tol, out) -> None:
+    """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none = whole catalogue).
+
+    Prints relative errors in % (engine - reference) / reference and wall times. Exit code 0, or 1
+    when a row crashed, timed out, went unstable or found no contact.
+    """
+    from impactval.runner import any_failed, resolve_engine, run, text_table
+    from impactval.scenarios.scene import catalogue_names
+
+    specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
+    settings = _run_settings(dt, contact, integrator, segments, timeout, tail)
+    names = list(scene) or catalogue_names()
+    _warn_if_compiling()
+
+    def progress(row):
+        click.echo(f"  {row['scene']} / {row['engine']}: {row['status']}", err=True)
+
+    df = run(names, specs, settings, tol=tol, out=out, on_row=progress)
+    click.echo(text_table(df))
+    click.echo(f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}")
+    if any_failed(df):
+        sys.exit(1)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

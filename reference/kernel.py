@@ -275,9 +275,26 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 ei = Ei[jt, i]
                 pr[i] = er * yr[i] - ei * yi[i]
                 pi_[i] = er * yi[i] + ei * yr[i]
-            for l in range(m + 1):
-                al = a_known[l]
-                if al != 0.0:
+            need_kc = Kc_j != jt
+            if need_kc:
+                # the new node's weights Kc = sum_l K_l c_l, in the same sweep as the known part
+                for i in range(n):
+                    Kcr[i] = 0.0
+                    Kci[i] = 0.0
+                for l in range(m + 1):
+                    al = a_known[l]
+                    cl = c[l]
+                    for i in range(n):
+                        kr = Kr[jt, l, i]
+                        ki = Ki[jt, l, i]
+                        pr[i] += kr * al
+                        pi_[i] += ki * al
+                        Kcr[i] += kr * cl
+                        Kci[i] += ki * cl
+                Kc_j = jt
+            else:
+                for l in range(m + 1):
+                    al = a_known[l]
                     for i in range(n):
                         pr[i] += Kr[jt, l, i] * al
                         pi_[i] += Ki[jt, l, i] * al
@@ -310,16 +327,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
             break
         # ---------------------------------------------------------------- accept
-        if Kc_j != j:
-            for i in range(n):
-                Kcr[i] = 0.0
-                Kci[i] = 0.0
-            for l in range(m + 1):
-                cl = c[l]
-                for i in range(n):
-                    Kcr[i] += Kr[jt, l, i] * cl
-                    Kci[i] += Ki[jt, l, i] * cl
-            Kc_j = j
         emod = 0.0
         for i in range(n):
             a = pr[i] + Kcr[i] * f_new
