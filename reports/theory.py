@@ -135,16 +135,21 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
                      f"{_pct(r['rel_t_m'])} | {_pct(r['rel_f_m'])} | {_pct(r['rel_delta_m'])} |")
     lines.append("")
     if plot_name:
-        lines += [f"![contact force by model]({plot_name})", ""]
+        lines += [f"![contact force by model]({plot_name})", "",
+                  "The perturbation curves are d0 + d1 over the zero-order contact; their peaks differ from the "
+                  "first-order metrics (evaluated at the zero-order peak) by terms of second order, which are "
+                  "visible when the structure's effect is large.", ""]
     c = cmp.choice
     if len(c.s):
         se = c.structure_effect
-        valid = "small: first order is accurate (error ~ s^2)" if cmp.s_total < 0.05 else \
-            "not small: the first-order results are only indicative (error ~ s^2 per mode, and secular terms)"
+        size = max(abs(se.t_m), abs(se.f_m), abs(se.delta_m))
+        valid = ("small: the first-order results are accurate (error ~ the square of the shifts)" if size < 0.05 else
+                 "not small: the first-order results are only indicative (their error is ~ the square of the shifts)")
         lines += ["## Which modes matter", "",
-                  f"Sum of the small parameters s_j = (m0/m_j) phi_j0^2 over the modes used: {cmp.s_total:.4g} ({valid}).",
                   f"First-order effect of the whole structure: t_m {_pct(se.t_m)}, f_m {_pct(se.f_m)}, "
-                  f"delta_m {_pct(se.delta_m)}.",
+                  f"delta_m {_pct(se.delta_m)} ({valid}). Sum of the small parameters s_j = (m0/m_j) phi_j0^2 "
+                  f"over the modes used: {cmp.s_total:.4g} (modes far above the impact frequency count with "
+                  "s_j/w_j^2 only).",
                   f"For a relative tolerance of {c.tol:g}: keep **{c.count}** modes with the residual static "
                   f"flexibility of the rest ({c.count_without_residual} without it; highest kept frequency "
                   f"{c.omega_max / (2 * math.pi):.5g} Hz). A rigid plate is "
