@@ -520,3 +520,35 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
     coarse = contacts(tc[:cnt_c], dc[:cnt_c], flc[:cnt_c])
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
             e[:cnt].copy(), fl[:cnt].copy(), fine, coarse)
+
+
+@njit(cache=True)
+def unresolved(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float) -> float:
+    """sum_i s_w[i] min(1, (omega_i H / phase)^6): the bound for modes a base step H does not resolve."""
+    total = 0.0
+    for i in range(omega.shape[0]):
+        x = omega[i] * H / phase
+        x2 = x * x
+        v = x2 * x2 * x2
+        total += s_w[i] * (v if v < 1.0 else 1.0)
+    return total
+
+
+@njit(cache=True)
+def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, target: float) -> float:
+    """The largest base step <= H whose unresolved-mode bound is <= target (bisection in log H)."""
+    if unresolved(s_w, omega, H, phase) <= target:
+        return H
+    lo = H
+    while unresolved(s_w, omega, lo, phase) > target and lo > 1e-30:
+        lo *= 0.125
+    hi = H
+    for _ in range(60):
+        mid = np.sqrt(lo * hi)
+        if unresolved(s_w, omega, mid, phase) > target:
+            hi = mid
+        else:
+            lo = mid
+        if hi / lo < 1.0 + 1e-3:
+            break
+    return lo

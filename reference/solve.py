@@ -152,12 +152,9 @@ def unresolved_bound(s_w: np.ndarray, omega: np.ndarray, H: float) -> float:
     they cause is aliased by the interpolation; their whole dynamic effect beyond a static spring
     bounds that error.
     """
-    if not len(omega):
-        return 0.0
     # a mode with phase omega H per step is aliased in proportion to the interpolation error of
     # its ringing, ~(omega H)^6: weight (omega H / RESOLVED_PHASE)^6, capped at its whole effect
-    x2 = (omega * (H / RESOLVED_PHASE)) ** 2
-    return float(s_w @ np.minimum(1.0, x2 * x2 * x2))
+    return kernel.unresolved(s_w, omega, H, RESOLVED_PHASE)
 
 
 def _estimate(fine: Metrics, coarse: Metrics, unresolved: float = 0.0) -> Metrics:
@@ -185,11 +182,7 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     n = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
     # and resolve enough modes that those the step does not resolve stay within tol / 4
     s_w = _mode_weights(omega, g, mass, plate)
-    if len(omega) and unresolved_bound(s_w, omega, plate.t_m / n) > tol / 4:
-        cand = n * 1.15 ** np.arange(90)                       # up to ~3e5 n
-        x2 = np.outer(plate.t_m / cand, omega / RESOLVED_PHASE) ** 2
-        ok = np.minimum(1.0, x2 * x2 * x2) @ s_w <= tol / 4
-        n = float(cand[int(np.argmax(ok))] if ok.any() else cand[-1])
+    n = plate.t_m / kernel.largest_step(s_w, omega, plate.t_m / n, RESOLVED_PHASE, tol / 4)
     for _ in range(12):
         H = plate.t_m / n
         J = levels(n, tol)
