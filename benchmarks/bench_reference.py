@@ -66,7 +66,7 @@ def main(full: bool = False) -> None:
     # DOP853: loosest rtol reaching 1e-6 on all three metrics (160 modes)
     md = structure_modes(base, 160)
     truth = impactval.solve(base, modes=160, tol=1e-10).metrics
-    for rtol in (1e-6, 3e-7, 1e-7, 3e-8, 1e-8, 3e-9, 1e-9):
+    for rtol in (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8, 3e-9, 1e-9):
         m, info = solve_ode(md, m0, alpha, v0, rtol=rtol, atol=rtol * 1e-2)
         e = m.relative_to(truth)
         if max(abs(e.t_m), abs(e.f_m), abs(e.delta_m)) <= 1e-6:

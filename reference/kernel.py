@@ -552,3 +552,53 @@ def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, tar
         if hi / lo < 1.0 + 1e-3:
             break
     return lo
+
+
+@njit(cache=True)
+def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
+               est_order, phase, coeff, smallest_factor):
+    """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
+
+    Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
+    base step count n).
+    """
+    # weights of the unresolved-mode bound: coeff s w^-3.5, s = m0 g omega, w = omega delta/v0
+    nm = omega.shape[0]
+    s_w = np.empty(nm)
+    for i in range(nm):
+        w = omega[i] * delta_plate / v0
+        s_w[i] = coeff * m0 * g[i] * omega[i] * w ** -3.5
+    n = n0
+    if nm > 0:
+        n = t_plate / largest_step(s_w, omega, t_plate / n, phase, tol / 4.0)
+    scale = 1.0 / (2.0**est_order - 1.0)
+    for _ in range(12):
+        H = t_plate / n
+        smallest = (smallest_factor * tol) ** 0.4     # smallest step / t_plate (see solve.levels)
+        J = int(np.ceil(np.log2(1.0 / (smallest * n))))
+        J = min(max(J, 3), 30)
+        max_nodes = int(6 * n + 60 * J + 50)
+        if window > 0.0:
+            max_nodes += int(2.5 * window / H)
+        for _ in range(6):
+            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window, max_nodes)
+            if out[0] == STATUS_OK:
+                break
+            max_nodes *= 4
+        st, cnt, t, d, f, x, u, e, fl, fine, coarse = out
+        if st != STATUS_OK:
+            return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n
+        tm_f = fine[0, 1] - fine[0, 0]
+        tm_c = coarse[0, 1] - coarse[0, 0]
+        dm_f = fine[0, 2]
+        dm_c = coarse[0, 2]
+        fm_f = alpha * dm_f**1.5
+        fm_c = alpha * dm_c**1.5
+        rel = max(abs(tm_f - tm_c) / tm_f, max(abs(fm_f - fm_c) / fm_f, abs(dm_f - dm_c) / dm_f)) * scale
+        rel += unresolved(s_w, omega, H, phase)
+        ratio = rel / tol
+        if ratio <= 1.0 or n > 1e6:
+            return st, cnt, t, d, f, x, u, e, fl, fine, rel, n
+        grow = 1.1 * ratio ** (1.0 / est_order)
+        n *= min(max(1.25, grow), 4.0)
+    return st, cnt, t, d, f, x, u, e, fl, fine, rel, n

@@ -33,11 +33,19 @@ def solve_ode(modes: Modes, mass: float, alpha: float, v0: float, rtol: float = 
     n = len(w)
     k = 1.25                                              # alpha delta_m^2.5 / (m0 v0^2)
 
+    w2 = w**2
+    phi_mu = phi / mu
+    out = np.empty(2 + 2 * n)
+
     def rhs(_t, y):
-        x1, v1, q, vq = y[0], y[1], y[2:2 + n], y[2 + n:]
-        d = x1 - phi @ q
+        d = y[0] - phi @ y[2:2 + n]
         f = k * d * np.sqrt(d) if d > 0 else 0.0
-        return np.concatenate(([v1, -f], vq, -w**2 * q + phi * f / mu))
+        out[0] = y[1]
+        out[1] = -f
+        out[2:2 + n] = y[2 + n:]
+        np.multiply(phi_mu, f, out=out[2 + n:])
+        out[2 + n:] -= w2 * y[2:2 + n]
+        return out.copy()
 
     def ev_end(_t, y):
         return y[0] - phi @ y[2:2 + n]

@@ -124,10 +124,14 @@ def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float
                t, d, f, x, u, e, contacts, -float(u[end]))
 
 
+#: the smallest step H/2^J is ~(SMALLEST_STEP_FACTOR tol)^0.4 t_plate
+SMALLEST_STEP_FACTOR = 1e-3
+
+
 def levels(n_steps: float, tol: float) -> int:
     """Step-size levels J: the smallest step H/2^J is ~(1e-3 tol)^0.4 t_plate. The first step's force
     is only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not to matter."""
-    smallest = (1e-3 * tol) ** 0.4
+    smallest = (SMALLEST_STEP_FACTOR * tol) ** 0.4
     return int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 3), 30))
 
 
@@ -139,33 +143,6 @@ RESOLVED_PHASE = 2.0
 UNRESOLVED_COEFF = 2.5
 
 
-def _mode_weights(omega: np.ndarray, g: np.ndarray, mass: float, plate) -> np.ndarray:
-    """UNRESOLVED_COEFF s_j w_j^-3.5 per mode (g = phi^2/(m omega), so s = m0 g omega)."""
-    w = omega * plate.delta_m / plate.v0
-    return UNRESOLVED_COEFF * mass * g * omega * w**-3.5
-
-
-def unresolved_bound(s_w: np.ndarray, omega: np.ndarray, H: float) -> float:
-    """Relative error bound from the modes the base step H does not resolve well (omega H ~> 1).
-
-    They are still integrated (exactly, for the interpolated force), but the force's fast ringing
-    they cause is aliased by the interpolation; their whole dynamic effect beyond a static spring
-    bounds that error.
-    """
-    # a mode with phase omega H per step is aliased in proportion to the interpolation error of
-    # its ringing, ~(omega H)^6: weight (omega H / RESOLVED_PHASE)^6, capped at its whole effect
-    return kernel.unresolved(s_w, omega, H, RESOLVED_PHASE)
-
-
-def _estimate(fine: Metrics, coarse: Metrics, unresolved: float = 0.0) -> Metrics:
-    """Time-step uncertainty of `fine`. One relative bound for all three metrics (the largest of the
-    three Richardson estimates): a single metric's estimate can vanish where its error changes sign;
-    plus the bound for modes the step does not resolve."""
-    rel = max(abs(fine.t_m - coarse.t_m) / fine.t_m, abs(fine.f_m - coarse.f_m) / fine.f_m,
-              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0) + unresolved
-    return Metrics(rel * fine.t_m, rel * fine.f_m, rel * fine.delta_m)
-
-
 def _rel(u: Metrics, m: Metrics) -> float:
     return max(u.t_m / m.t_m, u.f_m / m.f_m, u.delta_m / m.delta_m)
 
@@ -174,40 +151,26 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
                 window: float = 0.0) -> tuple[Run, Metrics]:
     """Solve to a relative time-step error estimate <= tol on t_m, f_m, delta_m.
 
-    Returns the finer run and its (absolute) time-step uncertainty.
+    Returns the finer run and its (absolute) time-step uncertainty: the Richardson estimate of the
+    fine/coarse pair (order ESTIMATE_ORDER assumed) plus the bound for modes the base step does not
+    resolve; the base step shrinks until their sum is <= tol (the loop runs in kernel.solve_auto).
     """
     plate = plate_impact(mass, alpha, v0)
     omega, g, ew = _select(modes)
-    # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2
-    n = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
-    # and resolve enough modes that those the step does not resolve stay within tol / 4
-    s_w = _mode_weights(omega, g, mass, plate)
-    n = plate.t_m / kernel.largest_step(s_w, omega, plate.t_m / n, RESOLVED_PHASE, tol / 4)
-    for _ in range(12):
-        H = plate.t_m / n
-        J = levels(n, tol)
-        max_nodes = int(6 * n + 60 * J + 50 + (2.5 * window / H if window > 0 else 0))
-        for _ in range(6):
-            st, cnt, t, d, f, x, u, e, flags, fine, coarse = kernel.solve_pair(
-                omega, g, ew, mass, alpha, v0, modes.residual_flexibility, H, J, P_DEGREE,
-                GRADING_WINDOW * plate.t_m, window, max_nodes)
-            if st == kernel.STATUS_OK:
-                break
-            max_nodes *= 4
-        else:  # pragma: no cover - would need a pathological scene
-            raise ImpactvalError(f"reference solver did not finish the contact within {max_nodes} steps")
-        contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in fine.tolist())
-        first = contacts[0]
-        m_fine = Metrics(first.t_end - first.t_start, first.f_max, first.delta_max)
-        c0 = coarse[0]
-        m_coarse = Metrics(c0[1] - c0[0], alpha * c0[2] ** 1.5, c0[2])
-        unc = _estimate(m_fine, m_coarse, unresolved_bound(s_w, omega, H))
-        ratio = _rel(unc, m_fine) / tol
-        if ratio <= 1.0 or n > 1e6:
-            break
-        n *= min(max(1.25, 1.1 * ratio ** (1.0 / ESTIMATE_ORDER)), 4.0)
+    # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
+    # the base step is then shortened until modes it does not resolve stay within tol / 4 (in the kernel)
+    n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    st, cnt, t, d, f, x, u, e, flags, fine, rel, n = kernel.solve_auto(
+        omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
+        P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, RESOLVED_PHASE, UNRESOLVED_COEFF, SMALLEST_STEP_FACTOR)
+    if st != kernel.STATUS_OK:  # pragma: no cover - would need a pathological scene
+        raise ImpactvalError("reference solver did not finish the contact")
+    contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in fine.tolist())
+    first = contacts[0]
+    m = Metrics(first.t_end - first.t_start, first.f_max, first.delta_max)
     end = int(np.argmax(flags == 2))
-    return Run(m_fine, cnt - 1, t, d, f, x, u, e, contacts, -float(u[end])), unc
+    return (Run(m, cnt - 1, t, d, f, x, u, e, contacts, -float(u[end])),
+            Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m))
 
 
 def _check_tol(tol: float) -> float:
