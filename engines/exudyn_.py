@@ -75,22 +75,26 @@ OPTIONS = {
     "fe_elements": "FE mesh (nx, ny, nz) hexahedra (default: element length = beam height, 1 x 1 section)",
     "cache": "True (default): cache FE models on disk",
 }
-#: default beam modes when neither settings.modes nor the scene's [target] modes give a count
-DEFAULT_MODES = 20
+#: most beam modes chosen automatically (the cost per step grows ~ n^2)
+MAX_DEFAULT_MODES = 60
 #: simulated window: starts at this many rigid-plate contact times, doubled until the contact ends
 WINDOW_START, WINDOW_MAX = 2.5, 160.0
 FRAME_MASS = 1e12
 
 
 def default_modes(scene) -> int:
-    """Beam mode count when settings.modes is None: the scene's own count, else DEFAULT_MODES.
+    """Beam mode count when settings.modes is None: the scene's own `modes`, else the reference's
+    first guess (`reference.solve.initial_mode_count`: the modes below 8x the rigid-plate impact
+    frequency, 24 for the worked beam), at most MAX_DEFAULT_MODES.
 
-    One place for the rule, so a mode criterion (which modes matter for the impact) can size it later.
+    One place for the rule, so a better mode criterion can size it later.
     """
+    from impactval.reference.solve import initial_mode_count
+
     target = scene.target
     if getattr(target, "modes", None):
         return int(target.modes)
-    return DEFAULT_MODES
+    return min(initial_mode_count(scene), MAX_DEFAULT_MODES)
 
 
 @dataclass
