@@ -212,7 +212,6 @@ def fe_beam(beam, n_modes: int, elements: tuple[int, int, int] | None = None, us
     """The FE model of `beam` with its first `n_modes` vertical-bending modes (cached on disk)."""
     import time
 
-    import scipy.sparse as sp
     from scipy.sparse.linalg import eigsh
 
     elements = tuple(int(e) for e in (elements or default_elements(beam, n_modes)))

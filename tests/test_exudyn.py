@@ -105,6 +105,7 @@ def test_solver_error_is_unstable(adapter, plate, monkeypatch):
 @pytest.mark.parametrize("options, field", [((("beam_model", "beem"),), "beam_model"),
                                             ((("spectral_radius", 2.0),), "spectral_radius"),
                                             ((("time_step", 1e-6),), "time_step"),
+                                            ((("rtol", 1e-15),), "rtol"),
                                             ((("fe_elements", (10, 0, 1)),), "fe_elements")])
 def test_bad_options_name_the_field(adapter, plate, options, field):
     with pytest.raises(EngineError, match=field):
