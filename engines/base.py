@@ -102,7 +102,11 @@ class EngineUnavailable(Exception):
 
 
 class EngineDiverged(Exception):
-    """The simulation produced NaN or blew up; becomes status "unstable"."""
+    """The simulation produced NaN or blew up; becomes status "unstable" (with `diagnostics`)."""
+
+    def __init__(self, message: str, diagnostics: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.diagnostics = diagnostics or {}
 
 
 class EngineAdapter:
@@ -151,7 +155,7 @@ class EngineAdapter:
             sim = self._simulate(scene, settings)
         except EngineDiverged as err:
             return ImpactResult.failed(scene.name, self.name, "unstable", str(err), settings=settings.as_dict(),
-                                       version=self._safe_version())
+                                       version=self._safe_version(), diagnostics=getattr(err, "diagnostics", {}))
         return self.result_from(scene, settings, sim)
 
     def _safe_version(self) -> str:
@@ -260,9 +264,29 @@ def load_adapter(spec: str) -> EngineAdapter:
     return getattr(importlib.import_module(mod), cls)()
 
 
+def _quiet_stdout() -> None:
+    """Engines print banners from C (pybullet's build time, on stderr): keep the parent's table clean.
+    Failures still reach the parent: exceptions as rows, a dying process by its exit code."""
+    try:
+        import os
+        import sys
+
+        sys.stdout.flush()
+        sys.stderr.flush()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        os.close(devnull)
+    except OSError:  # pragma: no cover - only cosmetic
+        pass
+
+
 def _child(spec: str, scene, settings: EngineSettings, conn) -> None:
+    _quiet_stdout()
     try:
         res = load_adapter(spec).run(scene, settings)
+    except EngineError as err:      # the scene/settings combination is not supported by this engine
+        res = ImpactResult.failed(scene.name, spec, "skipped", str(err), settings=settings.as_dict())
     except Exception as err:  # noqa: BLE001 - every failure must become a row
         tb = traceback.format_exc(limit=4)
         res = ImpactResult.failed(scene.name, spec, "crashed", f"{type(err).__name__}: {err}",

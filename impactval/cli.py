@@ -14,16 +14,22 @@ import click
 from impactval.errors import ImpactvalError
 
 
-def _fmt(x: float, unit: str, scale: float) -> str:
-    return "n/a" if not math.isfinite(x) else f"{x * scale:.6f} {unit}"
+def _pm(value: float, unc: float) -> str:
+    """'value ± uncertainty' with the value to the uncertainty's second significant digit."""
+    if not math.isfinite(value):
+        return "n/a"
+    if not unc > 0:
+        return f"{value:.9g}"
+    digits = max(0, min(12, 1 - math.floor(math.log10(unc))))
+    return f"{value:.{digits}f} ± {unc:.1g}"
 
 
 def _warn_if_compiling() -> None:
     from impactval.reference import kernel
 
     try:
-        path = Path(kernel.run._cache._cache_path)
-        cached = any(path.glob("kernel.run-*.nbi"))
+        path = Path(kernel.solve_pair._cache._cache_path)
+        cached = any(path.glob("kernel.solve_pair-*.nbi"))
     except Exception:  # noqa: BLE001 - only a hint
         cached = True
     if not cached:
@@ -64,7 +70,12 @@ def scenes(tag: str | None) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per scene (SI units).")
 @click.option("--curve", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the time series (t, delta, f, x_ball, x_structure, energy) to this CSV file.")
-def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, curve: str | None) -> None:
+@click.option("--model", type=click.Choice(["nonlinear", "linear", "perturbation"]), default="nonlinear",
+              show_default=True, help="Hertz contact (exact), linear contact k0 (exact) or first-order perturbation.")
+@click.option("--explain", is_flag=True, help="Also show the modes that matter, their weights, the chosen count "
+              "and whether a rigid plate would do.")
+def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, curve: str | None,
+              model: str = "nonlinear", explain: bool = False) -> None:
     """Reference solution of SCENE (catalogue names or TOML paths; none = the whole catalogue)."""
     import impactval
     from impactval.scenarios.scene import catalogue_names
@@ -73,10 +84,12 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     if curve and len(names) != 1:
         raise ImpactvalError("--curve writes one scene's series: give exactly one SCENE.")
     scenes_ = [impactval.load_scene(n) for n in names]
+    if model != "nonlinear":
+        return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
     _warn_if_compiling()
     if not as_json:
-        click.echo(f"{'scene':26s} {'t_m [us]':>14s} {'f_m [N]':>14s} {'delta_m [um]':>14s} "
-                   f"{'rel. unc.':>9s} {'modes':>5s} {'contacts':>8s}")
+        click.echo(f"{'scene':24s} {'t_m [us]':>22s} {'f_m [N]':>24s} {'delta_m [um]':>22s} "
+                   f"{'modes':>5s} {'contacts':>8s}")
     for sc in scenes_:
         r = impactval.solve(sc, tol=tol, window=window)
         u = r.uncertainty
@@ -86,15 +99,152 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
                                    "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
                                    "contacts": [c.__dict__ for c in r.contacts]}))
         else:
-            rel = max(u.t_m / r.t_m, u.f_m / r.f_m, u.delta_m / r.delta_m)
-            click.echo(f"{r.scene:26s} {r.t_m * 1e6:14.6f} {r.f_m:14.6f} {r.delta_m * 1e6:14.6f} "
-                       f"{rel:9.1e} {r.modes:5d} {len(r.contacts):8d}")
+            click.echo(f"{r.scene:24s} {_pm(r.t_m * 1e6, u.t_m * 1e6):>22s} {_pm(r.f_m, u.f_m):>24s} "
+                       f"{_pm(r.delta_m * 1e6, u.delta_m * 1e6):>22s} {r.modes:5d} {len(r.contacts):8d}")
         if curve:
             import numpy as np
 
             data = np.column_stack([r.t, r.delta, r.f, r.x_ball, r.x_structure, r.energy])
             np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
                        comments="")
+        if explain and not as_json:
+            _explain(sc, tol)
+
+
+def _explain(sc, tol: float) -> None:
+    """The modes that matter for `sc` at relative tolerance `tol` (first-order weights, issue 3)."""
+    import numpy as np
+
+    from impactval.reference.modechoice import required_modes
+
+    c = required_modes(sc, min(max(tol, 1e-8), 0.5))
+    if len(c.s) == 0:
+        click.echo("  rigid plate: no structure modes")
+        return
+    e = c.structure_effect
+    click.echo(f"  structure effect (first order): t_m {100 * e.t_m:+.3f} %, f_m {100 * e.f_m:+.3f} %, "
+               f"delta_m {100 * e.delta_m:+.3f} %; rigid plate enough at tol {c.tol:g}: "
+               f"{'yes' if c.rigid_plate_enough else 'no'}")
+    click.echo(f"  modes needed: {c.count} (+ residual static flexibility), {c.count_without_residual} without it")
+    size = np.maximum(np.abs(c.d_t), np.abs(c.d_f))
+    top = sorted(int(i) for i in np.argsort(-size)[:8] if size[i] > 0)
+    click.echo(f"  {'mode':>6s} {'omega [rad/s]':>14s} {'w':>9s} {'s':>9s} {'s*TH (t_m)':>11s} {'1.5s*MH (f_m)':>13s}")
+    for j in top:
+        click.echo(f"  {j + 1:6d} {c.omega[j]:14.6g} {c.w[j]:9.4g} {c.s[j]:9.4g} {c.d_t[j]:+11.3e} {c.d_f[j]:+13.3e}")
+
+
+def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: bool, curve: str | None,
+                      explain: bool) -> None:
+    """`reference --model linear|perturbation`: the exact linear-contact or the first-order solution."""
+    import numpy as np
+
+    from impactval.reference.linear import solve_linear
+    from impactval.reference.perturbation import perturbation, perturbation_curve
+
+    if not as_json:
+        click.echo(f"{'scene':24s} {'t_m [us]':>22s} {'f_m [N]':>24s} {'delta_m [um]':>22s} {'modes':>5s}  model")
+    for sc in scenes_:
+        if model == "linear":
+            r = solve_linear(sc, tol=tol, window=window)
+            m, u, n, label = r.metrics, r.uncertainty, r.modes, r.model
+            series = (r.t, r.delta, r.f)
+        else:
+            p = perturbation(sc, "hertz")
+            m, u, n, label = p.metrics, None, len(p.weights.s), "hertz-first-order"
+            series = perturbation_curve(sc, "hertz") if curve else None
+        if as_json:
+            click.echo(json.dumps({"scene": sc.name, "model": label, "t_m": m.t_m, "f_m": m.f_m, "delta_m": m.delta_m,
+                                   "uncertainty": None if u is None else u.as_dict(), "modes": n}))
+        else:
+            pm = (lambda x, du, k: _pm(x * k, du * k)) if u is not None else (lambda x, du, k: f"{x * k:.9g}")
+            click.echo(f"{sc.name:24s} {pm(m.t_m, u.t_m if u else 0, 1e6):>22s} {pm(m.f_m, u.f_m if u else 0, 1):>24s} "
+                       f"{pm(m.delta_m, u.delta_m if u else 0, 1e6):>22s} {n:5d}  {label}")
+        if curve:
+            np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
+        if explain and not as_json:
+            _explain(sc, tol)
+
+
+@main.command()
+@click.argument("scene", nargs=-1)
+@click.option("--out", "out_dir", default="theory-report", show_default=True, type=click.Path(file_okay=False),
+              help="Directory for the markdown pages and PNG plots.")
+@click.option("--tol", default=1e-6, show_default=True, type=float, help="Relative tolerance of the exact solvers.")
+@click.option("--no-plot", is_flag=True, help="Skip the PNG plots (no matplotlib needed).")
+def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> None:
+    """Compare nonlinear, linear and perturbation theory for SCENE (none = the whole catalogue): one markdown
+    page per scene (metrics, model-form error of a linear contact, modes that matter, force plot) and an index."""
+    import impactval
+    from impactval.reports.theory import theory_index, theory_page
+    from impactval.scenarios.scene import catalogue_names
+
+    names = list(scene) or catalogue_names()
+    scenes_ = [impactval.load_scene(n) for n in names]
+    plot = not no_plot
+    if plot:
+        import importlib.util
+
+        if importlib.util.find_spec("matplotlib") is None:
+            click.echo("impactval: matplotlib not installed (pip install 'impactval[plots]'): pages without plots",
+                       err=True)
+            plot = False
+    _warn_if_compiling()
+    comparisons = []
+    for sc in scenes_:
+        page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
+        comparisons.append(cmp)
+        e = cmp.model_form_error
+        click.echo(f"{sc.name:24s} linear-contact model-form error: t_m {100 * e.t_m:+8.3f} %  "
+                   f"f_m {100 * e.f_m:+8.3f} %  delta_m {100 * e.delta_m:+8.3f} %   -> {page}")
+    click.echo(f"index: {theory_index(comparisons, out_dir)}")
+
+
+# ---------------------------------------------------------------------------- impactval run
+def _run_settings(dt, contact, integrator, segments, timeout, tail):
+    from impactval.engines.base import EngineSettings
+
+    return EngineSettings(dt=dt, contact=contact, integrator=integrator, segments=segments, timeout_s=timeout,
+                          tail=tail)
+
+
+@main.command(name="run")
+@click.argument("scene", nargs=-1)
+@click.option("--engines", "engines", default="mujoco", show_default=True,
+              help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
+@click.option("--dt", default=1e-6, show_default=True, type=float, help="Engine time step [s].")
+@click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]),
+              help="hertz: exact law injected; native: engine contact as the linear spring k0; "
+                   "native-hertz: engine contact shaped toward Hertz.")
+@click.option("--integrator", default=None, help="Engine integrator (e.g. MuJoCo: Euler, implicitfast, RK4).")
+@click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
+@click.option("--timeout", default=600.0, show_default=True, type=float, help="Time limit per engine job [s].")
+@click.option("--tail", default=0.0, show_default=True, type=float,
+              help="Simulated time [s] after the first contact ends (re-contacts).")
+@click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
+@click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
+              help="Directory for results.csv (rows appended as they finish) and report.md.")
+def run_command(scene, engines, dt, contact, integrator, segments, timeout, tail, tol, out) -> None:
+    """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none = whole catalogue).
+
+    Prints relative errors in % (engine - reference) / reference and wall times. Exit code 0, or 1
+    when a row crashed, timed out, went unstable or found no contact.
+    """
+    from impactval.runner import any_failed, resolve_engine, run, text_table
+    from impactval.scenarios.scene import catalogue_names
+
+    specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
+    settings = _run_settings(dt, contact, integrator, segments, timeout, tail)
+    names = list(scene) or catalogue_names()
+    _warn_if_compiling()
+
+    def progress(row):
+        click.echo(f"  {row['scene']} / {row['engine']}: {row['status']}", err=True)
+
+    df = run(names, specs, settings, tol=tol, out=out, on_row=progress)
+    click.echo(text_table(df))
+    click.echo(f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}")
+    if any_failed(df):
+        sys.exit(1)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import optimize
 
 
 @dataclass(frozen=True)
@@ -35,6 +34,8 @@ class Modes:
 @lru_cache(maxsize=64)
 def _beta_l(support: str, n: int) -> np.ndarray:
     """First n roots beta_n L of the frequency equation of `support`."""
+    from scipy import optimize      # lazy: keeps the CLI's start-up fast
+
     k = np.arange(1, n + 1, dtype=float)
     if support == "simply-supported":
         return k * math.pi
@@ -79,6 +80,7 @@ UNIVERSAL_BL = 60.0
 
 def shape_max_one(support: str, b: float) -> float:
     """max over the span of |unnormalised shape| of the mode with beta L = b (sampled, then refined)."""
+    from scipy import optimize
     # the hyperbolic terms die out 40/b from the ends; sample both end zones finely, plus the middle
     npts = int(min(64 * b / math.pi, 4000)) + 64
     zone = min(1.0, 40.0 / b)

@@ -8,10 +8,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
 
 #: c = integral_0^1 dx / sqrt(1 - x^(5/2)) = (2/5) B(2/5, 1/2)   (paper eq. 30)
-C_HERTZ = 0.4 * special.beta(0.4, 0.5)
+C_HERTZ = 0.4 * math.gamma(0.4) * math.gamma(0.5) / math.gamma(0.9)
 #: the paper's e0 = pi / (2 c): linear-spring duration over Hertz duration (eq. 85)
 E0 = math.pi / (2.0 * C_HERTZ)
 
@@ -54,6 +53,8 @@ class PlateImpact:
 
         Inverts t(delta) = (delta_m/v0) c I_u(2/5, 1/2), u = (delta/delta_m)^(5/2) (eq. 27, 29).
         """
+        from scipy import special     # lazy: keeps the CLI's start-up fast
+
         t = np.asarray(t, dtype=float)
         half = 0.5 * self.t_m
         tau = np.where(t <= half, t, self.t_m - t)
@@ -68,6 +69,8 @@ class PlateImpact:
 
     def time_of(self, delta: np.ndarray | float) -> np.ndarray:
         """Time [s] at which the approach first reaches `delta` [m] (0 <= delta <= delta_m)."""
+        from scipy import special
+
         x = np.clip(np.asarray(delta, dtype=float) / self.delta_m, 0.0, 1.0)
         return self.delta_m / self.v0 * C_HERTZ * special.betainc(0.4, 0.5, x**2.5)
 

@@ -34,68 +34,98 @@ STATUS_NO_CONTACT = 2
 
 
 @njit(cache=True)
-def _moments_one(theta: float, p: int, out: np.ndarray) -> None:
-    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p (series for small theta)."""
+def _moments_one(theta: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -> None:
+    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p.
+
+    |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
+    (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)!, then the
+    downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there.
+    """
     if abs(theta) < 2.0:
-        for l in range(p + 1):
-            term = 1.0 / (l + 1) + 0j
-            total = term
-            for m in range(60):
-                term = term * (1j * theta) / (l + m + 2)
-                total += term
-                if abs(term) < 1e-18 * abs(total):
-                    break
-            out[l] = total
+        # series for K_p
+        tr, ti = 1.0 / (p + 1), 0.0
+        sr, si = tr, ti
+        for m in range(80):
+            fac = theta / (p + m + 2)
+            tr, ti = -ti * fac, tr * fac            # term *= i theta / (p + m + 2)
+            sr += tr
+            si += ti
+            if abs(tr) + abs(ti) < 1e-18 * (abs(sr) + abs(si)):
+                break
+        out_re[p] = sr
+        out_im[p] = si
+        for l in range(p, 0, -1):
+            kr, ki = out_re[l], out_im[l]
+            out_re[l - 1] = (1.0 - theta * ki) / l     # (1 + i theta K_l) / l
+            out_im[l - 1] = (theta * kr) / l
     else:
-        it = 1j * theta
-        k = (np.exp(it) - 1.0) / it
-        out[0] = k
+        c, sn = np.cos(theta), np.sin(theta)
+        # K_0 = (e^{i theta} - 1)/(i theta) = (sin theta + i (1 - cos theta)) / theta
+        kr, ki = sn / theta, (1.0 - c) / theta
+        out_re[0] = kr
+        out_im[0] = ki
         for l in range(1, p + 1):
-            k = (l * k - 1.0) / it
-            out[l] = k
+            # (l K - 1)/(i theta) = -i (l K - 1)/theta
+            ar, ai = l * kr - 1.0, l * ki
+            kr, ki = ai / theta, -ar / theta
+            out_re[l] = kr
+            out_im[l] = ki
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
-    """Per-step tables for step sizes eta_j = H / 2^j.
+    """Per-step tables for step sizes eta_j = H / 2^j (real and imaginary parts apart, modes contiguous).
 
-    Returns E[j, i] = e^{i omega_i eta_j}, K[j, l, i] = int_0^eta_j e^{i omega_i (eta_j - s)} (s/eta_j)^l ds
-    [s], and S[j, l] = sum_i g_i Im K[j, l, i] [m/N].
+    Returns Er, Ei [j, i]: e^{i omega_i eta_j}; Kr, Ki [j, l, i]: g_i int_0^eta_j e^{i omega_i (eta_j - s)}
+    (s/eta_j)^l ds [m/N], g_i = phi_i^2/(m_i omega_i); S[j, l] = sum_i Ki[j, l, i] [m/N].
     """
     n = omega.shape[0]
-    E = np.empty((J + 1, n), dtype=np.complex128)
-    K = np.empty((J + 1, p + 1, n), dtype=np.complex128)
+    Er = np.empty((J + 1, n))
+    Ei = np.empty((J + 1, n))
+    Kr = np.empty((J + 1, p + 1, n))
+    Ki = np.empty((J + 1, p + 1, n))
     S = np.zeros((J + 1, p + 1))
-    buf = np.empty(p + 1, dtype=np.complex128)
+    br = np.empty(p + 1)
+    bi = np.empty(p + 1)
     for j in range(J + 1):
         eta = H / 2.0**j
         for i in range(n):
             theta = omega[i] * eta
-            E[j, i] = np.cos(theta) + 1j * np.sin(theta)
-            _moments_one(theta, p, buf)
+            Er[j, i] = np.cos(theta)
+            Ei[j, i] = np.sin(theta)
+            _moments_one(theta, p, br, bi)
+            w = g[i] * eta
             for l in range(p + 1):
-                K[j, l, i] = eta * buf[l]
-                S[j, l] += g[i] * (eta * buf[l]).imag
-    return E, K, S
+                Kr[j, l, i] = w * br[l]
+                Ki[j, l, i] = w * bi[l]
+                S[j, l] += w * bi[l]
+    return Er, Ei, Kr, Ki, S
 
 
 @njit(cache=True)
-def _lagrange_coeffs(sig: np.ndarray, m: int, L: np.ndarray) -> None:
-    """L[k, l]: monomial coefficients (power l) of the Lagrange basis polynomial of node k of sig[0..m]."""
+def _lagrange_coeffs(sig: np.ndarray, m: int, L: np.ndarray, P: np.ndarray) -> None:
+    """L[k, l]: monomial coefficients (power l) of the Lagrange basis polynomial of node k of sig[0..m].
+
+    O(m^2): L_k(s) = P(s) / ((s - sig_k) P'(sig_k)) with P(s) = prod_q (s - sig_q), by synthetic division.
+    """
+    for l in range(m + 2):           # P(s) coefficients, power l at index l (P: work array, len >= m + 2)
+        P[l] = 0.0
+    P[0] = 1.0
+    for q in range(m + 1):
+        for l in range(q + 1, 0, -1):
+            P[l] = P[l - 1] - sig[q] * P[l]
+        P[0] = -sig[q] * P[0]
     for k in range(m + 1):
-        for l in range(m + 1):
-            L[k, l] = 0.0
-        L[k, 0] = 1.0
-        deg = 0
+        dp = 1.0
         for q in range(m + 1):
-            if q == k:
-                continue
-            inv = 1.0 / (sig[k] - sig[q])
-            # multiply polynomial by (s - sig[q]) * inv
-            for l in range(deg + 1, 0, -1):
-                L[k, l] = (L[k, l - 1] - sig[q] * L[k, l]) * inv
-            L[k, 0] = -sig[q] * L[k, 0] * inv
-            deg += 1
+            if q != k:
+                dp *= sig[k] - sig[q]
+        # synthetic division of P by (s - sig_k): quotient degree m
+        b = P[m + 1]
+        L[k, m] = b / dp
+        for l in range(m, 0, -1):
+            b = P[l] + sig[k] * b
+            L[k, l - 1] = b / dp
 
 
 @njit(cache=True)
@@ -106,6 +136,7 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
         d2 = (D / (B * alpha)) ** (2.0 / 3.0)
         if d2 < d:
             d = d2
+    prev = np.inf
     for _ in range(100):
         sq = np.sqrt(d)
         F = d + B * alpha * d * sq - D
@@ -114,24 +145,29 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
         d -= step
         if d <= 0.0:
             d = 1e-300
-        if abs(step) <= 1e-16 * d:
+        # quadratic convergence until rounding: stop at 1 ulp or when the step stops shrinking
+        if abs(step) <= 2.3e-16 * d or abs(step) >= 0.5 * prev:
             break
+        prev = abs(step)
     return d
 
 
-@njit(cache=True)
-def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes):
+@njit(cache=True, fastmath=True, error_model="numpy")
+def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
-    and on for `window` [s] after it when window > 0 (re-contacts included).
+    and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
+    table level j + j0 (so one table set serves base steps H and H/2).
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
     Arrays: t [s], delta [m], f [N], x1 ball displacement [m], u ball velocity [m/s], energy [J].
     """
-    n = omega.shape[0]
+    n = ew.shape[0]
     gam = (p - 0.5) / (p + 1.0)
-    y = np.zeros(n, dtype=np.complex128)
-    ypre = np.zeros(n, dtype=np.complex128)
+    yr = np.zeros(n)
+    yi = np.zeros(n)
+    pr = np.zeros(n)
+    pi_ = np.zeros(n)
     ta = np.empty(max_nodes)
     da = np.empty(max_nodes)
     fa = np.empty(max_nodes)
@@ -142,9 +178,11 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
     sig = np.empty(p + 1)
     sig_prev = np.full(p + 1, np.nan)
     L = np.empty((p + 1, p + 1))
+    Pw = np.empty(p + 2)
     a_known = np.empty(p + 1)
     c = np.empty(p + 1)
-    Kc = np.empty(n, dtype=np.complex128)
+    Kcr = np.empty(n)
+    Kci = np.empty(n)
     Kc_j = -1
     m_prev = -1
 
@@ -165,6 +203,9 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
     seg_start = 0
     j_prev = J
     t_end = -1.0
+    etas = np.empty(J + 1)
+    for q in range(J + 1):
+        etas[q] = H / 2.0**q
     while True:
         if count >= max_nodes:
             return STATUS_OUT_OF_NODES, count, ta, da, fa, xa, ua, ea, flags
@@ -187,18 +228,19 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
                         if h2 < h_allow:
                             h_allow = h2
             j = 0
-            while j < J and H / 2.0**j > h_allow:
+            while j < J and etas[j] > h_allow:
                 j += 1
             if j < j_prev - 1:
                 j = j_prev - 1          # grow at most by 2 per step
         else:
             j = 0
         if t_end > 0.0:
-            while j < J and t + H / 2.0**j > t_end * (1 + 1e-12) :
+            while j < J and t + etas[j] > t_end * (1 + 1e-12):
                 j += 1
         # ---------------------------------------------------------------- attempt (halve on crossing)
         while True:
-            eta = H / 2.0**j
+            eta = etas[j]
+            jt = j + j0
             first = count - p
             if first < seg_start:
                 first = seg_start
@@ -213,7 +255,7 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
                         same = False
                         break
             if not same:
-                _lagrange_coeffs(sig, m, L)
+                _lagrange_coeffs(sig, m, L, Pw)
                 for k in range(m + 1):
                     sig_prev[k] = sig[k]
                 m_prev = m
@@ -227,15 +269,38 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
                     acc_l += L[k, l] * fa[first + k]
                 a_known[l] = acc_l
                 c[l] = L[m, l]
-            # pass 1: propagate every mode with the known part of the force
+            # pass 1: propagate every mode with the known part of the force (contiguous loops)
+            for i in range(n):
+                er = Er[jt, i]
+                ei = Ei[jt, i]
+                pr[i] = er * yr[i] - ei * yi[i]
+                pi_[i] = er * yi[i] + ei * yr[i]
+            need_kc = Kc_j != jt
+            if need_kc:
+                # the new node's weights Kc = sum_l K_l c_l, in the same sweep as the known part
+                for i in range(n):
+                    Kcr[i] = 0.0
+                    Kci[i] = 0.0
+                for l in range(m + 1):
+                    al = a_known[l]
+                    cl = c[l]
+                    for i in range(n):
+                        kr = Kr[jt, l, i]
+                        ki = Ki[jt, l, i]
+                        pr[i] += kr * al
+                        pi_[i] += ki * al
+                        Kcr[i] += kr * cl
+                        Kci[i] += ki * cl
+                Kc_j = jt
+            else:
+                for l in range(m + 1):
+                    al = a_known[l]
+                    for i in range(n):
+                        pr[i] += Kr[jt, l, i] * al
+                        pi_[i] += Ki[jt, l, i] * al
             acc = 0.0
             for i in range(n):
-                s_known = K[j, 0, i] * a_known[0]
-                for l in range(1, m + 1):
-                    s_known += K[j, l, i] * a_known[l]
-                yp = E[j, i] * y[i] + g[i] * s_known
-                ypre[i] = yp
-                acc += yp.imag
+                acc += pi_[i]
             wu = 0.0
             wx = 0.0
             cu = 0.0
@@ -246,7 +311,7 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
                 wx += a_known[l] / ((l + 1) * (l + 2))
                 cu += c[l] / (l + 1)
                 cx += c[l] / ((l + 1) * (l + 2))
-                cs += c[l] * S[j, l]
+                cs += c[l] * S[jt, l]
             u_pre = u - eta * wu / m0
             x1_pre = x1 + u * eta - eta * eta * wx / m0
             B = eta * eta * cx / m0 + cs + R
@@ -262,18 +327,13 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
                 continue
             break
         # ---------------------------------------------------------------- accept
-        if Kc_j != j:
-            for i in range(n):
-                s = K[j, 0, i] * c[0]
-                for l in range(1, m + 1):
-                    s += K[j, l, i] * c[l]
-                Kc[i] = g[i] * s
-            Kc_j = j
         emod = 0.0
         for i in range(n):
-            yi = ypre[i] + Kc[i] * f_new
-            y[i] = yi
-            emod += ew[i] * (yi.real * yi.real + yi.imag * yi.imag)
+            a = pr[i] + Kcr[i] * f_new
+            b = pi_[i] + Kci[i] * f_new
+            yr[i] = a
+            yi[i] = b
+            emod += ew[i] * (a * a + b * b)
         u = u_pre - eta * f_new * cu / m0
         x1 = x1_pre - eta * eta * f_new * cx / m0
         t = t + eta
@@ -311,53 +371,184 @@ def run(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, E, K, S, max_nodes
 
 
 @njit(cache=True)
-def _interp(ts: np.ndarray, ds: np.ndarray, x: float) -> float:
-    """Value at x of the polynomial through the points (ts, ds) (Lagrange form)."""
-    total = 0.0
-    for k in range(ts.shape[0]):
-        w = ds[k]
-        for l in range(ts.shape[0]):
-            if l != k:
-                w *= (x - ts[l]) / (ts[k] - ts[l])
-        total += w
-    return total
+def _fit(ts: np.ndarray, ds: np.ndarray, t0: float, scale: float) -> np.ndarray:
+    """Monomial coefficients (in x = (t - t0)/scale) of the polynomial through the points (ts, ds)."""
+    m = ts.shape[0] - 1
+    sig = (ts - t0) / scale
+    L = np.empty((m + 1, m + 1))
+    _lagrange_coeffs(sig, m, L, np.empty(m + 2))
+    c = np.zeros(m + 1)
+    for k in range(m + 1):
+        for l in range(m + 1):
+            c[l] += L[k, l] * ds[k]
+    return c
+
+
+@njit(cache=True)
+def _horner(c: np.ndarray, x: float):
+    """(value, first derivative) of the polynomial with monomial coefficients c at x."""
+    v = 0.0
+    dv = 0.0
+    for l in range(c.shape[0] - 1, -1, -1):
+        dv = dv * x + v
+        v = v * x + c[l]
+    return v, dv
+
+
+@njit(cache=True)
+def _root(c: np.ndarray, lo: float, hi: float, deriv: bool) -> float:
+    """Root in [lo, hi] of the polynomial c (deriv: of its derivative), the ends of opposite sign:
+    safeguarded Newton (bisection whenever Newton leaves the bracket)."""
+    if deriv:
+        n = c.shape[0] - 1
+        c2 = np.empty(n)
+        for l in range(n):
+            c2[l] = (l + 1) * c[l + 1]
+        c = c2
+    flo, _ = _horner(c, lo)
+    x = 0.5 * (lo + hi)
+    for _ in range(100):
+        fx, dfx = _horner(c, x)
+        if (fx > 0.0) == (flo > 0.0):
+            lo, flo = x, fx
+        else:
+            hi = x
+        xn = x - fx / dfx if dfx != 0.0 else 0.5 * (lo + hi)
+        if not (lo < xn < hi):
+            xn = 0.5 * (lo + hi)
+        if abs(xn - x) <= 1e-15 * (abs(x) + 1.0) or hi - lo <= 1e-15:
+            x = xn
+            break
+        x = xn
+    return x
 
 
 @njit(cache=True)
 def crossing(ts: np.ndarray, ds: np.ndarray, lo: float, hi: float) -> float:
     """Root in [lo, hi] of the interpolant through (ts, ds), whose values at lo and hi differ in sign."""
-    flo = _interp(ts, ds, lo)
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        fm = _interp(ts, ds, mid)
-        if (fm > 0.0) == (flo > 0.0):
-            lo, flo = mid, fm
-        else:
-            hi = mid
-        if hi - lo <= 1e-16 * abs(hi) + 1e-300:
-            break
-    return 0.5 * (lo + hi)
+    scale = hi - lo
+    c = _fit(ts, ds, hi, scale)
+    return hi + scale * _root(c, -1.0, 0.0, False)
 
 
 @njit(cache=True)
 def peak(ts: np.ndarray, ds: np.ndarray, lo: float, hi: float):
-    """(x, value) of the maximum of the interpolant through (ts, ds) on [lo, hi] (golden section)."""
-    gr = 0.6180339887498949
-    a, b = lo, hi
-    c = b - gr * (b - a)
-    d = a + gr * (b - a)
-    fc = _interp(ts, ds, c)
-    fd = _interp(ts, ds, d)
-    for _ in range(200):
-        if fc > fd:
-            b, d, fd = d, c, fc
-            c = b - gr * (b - a)
-            fc = _interp(ts, ds, c)
+    """(t, value) of the maximum of the interpolant through (ts, ds) on [lo, hi]."""
+    scale = 0.5 * (hi - lo)
+    mid = 0.5 * (lo + hi)
+    c = _fit(ts, ds, mid, scale)
+    n = c.shape[0]
+    d_lo = 0.0
+    d_hi = 0.0
+    for l in range(1, n):
+        d_lo += l * c[l] * (-1.0) ** (l - 1)
+        d_hi += l * c[l]
+    if d_lo > 0.0 and d_hi < 0.0:
+        x = _root(c, -1.0, 1.0, True)
+    else:   # no interior stationary point: the larger end
+        x = -1.0 if _horner(c, -1.0)[0] > _horner(c, 1.0)[0] else 1.0
+    return mid + scale * x, _horner(c, x)[0]
+
+
+@njit(cache=True)
+def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Contact phases from a run: rows (t_start, t_end, delta_max) [s, s, m]; t_end = NaN if the
+    window ended in contact. Start: linear interpolation over the H/2^J step in which free flight
+    (integrated exactly) turned into contact; end: root of the cubic through the last four contact
+    nodes; peak: maximum of the degree-6 interpolant around the largest node."""
+    n = t.shape[0]
+    count = 0
+    for k in range(n):
+        if flags[k] == 1:
+            count += 1
+    out = np.full((count, 3), np.nan)
+    row = -1
+    s = 0
+    for k in range(n):
+        if flags[k] == 1:
+            row += 1
+            s = k
+            if k == 0:
+                out[row, 0] = 0.0
+            else:
+                out[row, 0] = t[k] - d[k] * (t[k + 1] - t[k]) / (d[k + 1] - d[k])
+            # find the end
+            e = n - 1
+            ended = False
+            for q in range(k + 1, n):
+                if flags[q] == 2:
+                    e = q
+                    ended = True
+                    break
+            if ended:
+                lo = max(e - 3, s)
+                out[row, 1] = crossing(t[lo:e + 1], d[lo:e + 1], t[e - 1], t[e])
+            pk = s
+            for q in range(s, e + 1):
+                if d[q] > d[pk]:
+                    pk = q
+            lo = max(pk - 3, s + 1)
+            hi = min(pk + 4, e)
+            dmax = d[pk]
+            if hi - lo >= 3:
+                a = max(pk - 1, lo)
+                b = min(pk + 1, hi - 1)
+                _, v = peak(t[lo:hi], d[lo:hi], t[a], t[b])
+                if v > dmax:
+                    dmax = v
+            out[row, 2] = dmax
+    return out
+
+
+@njit(cache=True)
+def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
+    """The fine (base step H) and coarse (2H) runs that make one error estimate, in one call.
+
+    The tables for steps 2H/2^k, k = 0..J+1, serve both (coarse: k = 0..J, fine: k = 1..J+1), so the
+    smallest step scales with H and its error shows in the difference. Returns (status, n_nodes and
+    series of the fine run, its contacts, the coarse run's contacts); contacts rows are
+    (t_start, t_end, delta_max).
+    """
+    Er, Ei, Kr, Ki, S = moments(omega, g, 2.0 * H, J + 1, p)
+    st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 0)
+    st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
+                                        Er, Ei, Kr, Ki, S, max_nodes, 1)
+    if st != STATUS_OK or st_c != STATUS_OK:
+        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, np.zeros((0, 3)), np.zeros((0, 3))
+    fine = contacts(t[:cnt], d[:cnt], fl[:cnt])
+    coarse = contacts(tc[:cnt_c], dc[:cnt_c], flc[:cnt_c])
+    return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse)
+
+
+@njit(cache=True)
+def unresolved(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float) -> float:
+    """sum_i s_w[i] min(1, (omega_i H / phase)^6): the bound for modes a base step H does not resolve."""
+    total = 0.0
+    for i in range(omega.shape[0]):
+        x = omega[i] * H / phase
+        x2 = x * x
+        v = x2 * x2 * x2
+        total += s_w[i] * (v if v < 1.0 else 1.0)
+    return total
+
+
+@njit(cache=True)
+def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, target: float) -> float:
+    """The largest base step <= H whose unresolved-mode bound is <= target (bisection in log H)."""
+    if unresolved(s_w, omega, H, phase) <= target:
+        return H
+    lo = H
+    while unresolved(s_w, omega, lo, phase) > target and lo > 1e-30:
+        lo *= 0.125
+    hi = H
+    for _ in range(60):
+        mid = np.sqrt(lo * hi)
+        if unresolved(s_w, omega, mid, phase) > target:
+            hi = mid
         else:
-            a, c, fc = c, d, fd
-            d = a + gr * (b - a)
-            fd = _interp(ts, ds, d)
-        if b - a <= 1e-15 * (abs(a) + abs(b)) + 1e-300:
+            lo = mid
+        if hi / lo < 1.0 + 1e-3:
             break
-    x = 0.5 * (a + b)
-    return x, _interp(ts, ds, x)
+    return lo

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -31,6 +32,7 @@ GRADING_WINDOW = 0.2
 ESTIMATE_ORDER = 4
 #: steps per rigid-plate contact time at which the a-priori error model is anchored, and its error
 _N_ANCHOR, _ERR_ANCHOR = 20.0, 3e-6
+#: the first base-step count aims at an estimate of this fraction of tol
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,11 @@ class Run:
     rebound_velocity: float
 
 
+@lru_cache(maxsize=128)
+def _beam_modes_cached(beam, n: int, residual: bool) -> Modes:
+    return beam_modes(beam, n, residual=residual)
+
+
 def structure_modes(scene, n: int | None = None, residual: bool = False) -> Modes:
     """The modal data of a scene's target (empty for a rigid plate). For a beam `n` modes are used."""
     target = scene.target
@@ -57,10 +64,25 @@ def structure_modes(scene, n: int | None = None, residual: bool = False) -> Mode
     if target.kind == "modal":
         return Modes(np.asarray(target.omega, float), np.asarray(target.modal_mass, float),
                      np.asarray(target.phi, float), 0.0)
-    return beam_modes(target, int(n if n is not None else (target.modes or 1)), residual=residual)
+    return _beam_modes_cached(target, int(n if n is not None else (target.modes or 1)), residual)
 
 
 def _select(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    key = id(modes)
+    hit = _SELECT_CACHE.get(key)
+    if hit is not None and hit[0] is modes:
+        return hit[1]
+    out = _select_uncached(modes)
+    if len(_SELECT_CACHE) > 64:
+        _SELECT_CACHE.clear()
+    _SELECT_CACHE[key] = (modes, out)
+    return out
+
+
+_SELECT_CACHE: dict = {}
+
+
+def _select_uncached(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Arrays for the kernel: omega, g = phi^2/(m omega), energy weight omega/g; modes with
     phi = 0 at the impact point are never excited and are dropped."""
     keep = np.abs(modes.phi) > 1e-12
@@ -70,69 +92,77 @@ def _select(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float,
-              window: float = 0.0, tol: float = 1e-6) -> Run:
+              window: float = 0.0, J: int | None = None, tol: float = 1e-6) -> Run:
     """One integration with base step H = t_plate / n_steps (t_plate: rigid-plate duration).
 
     `window` [s]: keep integrating this long after the first contact ends (re-contacts).
-    `tol` sets the smallest step H / 2^J used at touch and separation: the first step's force is
-    only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not to matter.
+    `J` sets the smallest step H / 2^J used at touch and separation (default: from `tol`, see
+    `levels`).
     """
     plate = plate_impact(mass, alpha, v0)
     H = plate.t_m / n_steps
-    smallest = (1e-3 * tol) ** 0.4          # smallest step / t_plate
-    J = int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 4), 30))
+    if J is None:
+        J = levels(n_steps, tol)
     omega, g, ew = _select(modes)
-    E, K, S = kernel.moments(omega, g, H, J, P_DEGREE)
+    Er, Ei, Kr, Ki, S = kernel.moments(omega, g, H, J, P_DEGREE)
     max_nodes = int(6 * n_steps + 60 * J + 50 + (2.5 * window / H if window > 0 else 0))
     for _ in range(8):
         status, cnt, t, d, f, x, u, e, flags = kernel.run(
-            omega, g, ew, mass, alpha, v0, modes.residual_flexibility, H, J, P_DEGREE,
-            GRADING_WINDOW * plate.t_m, window, E, K, S, max_nodes)
+            ew, mass, alpha, v0, modes.residual_flexibility, H, J, P_DEGREE,
+            GRADING_WINDOW * plate.t_m, window, Er, Ei, Kr, Ki, S, max_nodes)
         if status == kernel.STATUS_OK:
             break
         max_nodes *= 4
     else:  # pragma: no cover - would need a pathological scene
         raise ImpactvalError(f"reference solver did not finish the contact within {max_nodes} steps")
     t, d, f, x, u, e, flags = t[:cnt], d[:cnt], f[:cnt], x[:cnt], u[:cnt], e[:cnt], flags[:cnt]
-    contacts = _contacts(t, d, flags, alpha)
+    table = kernel.contacts(t, d, flags)
+    contacts = tuple(Contact(float(a), float(b), alpha * float(c) ** 1.5, float(c)) for a, b, c in table)
     first = contacts[0]
     end = int(np.argmax(flags == 2))
     return Run(Metrics(first.t_end - first.t_start, first.f_max, first.delta_max), cnt - 1,
                t, d, f, x, u, e, contacts, -float(u[end]))
 
 
-def _contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, alpha: float) -> tuple[Contact, ...]:
-    """Contact phases with sub-step start, end and peak (interpolating delta, which is smooth)."""
-    starts = np.flatnonzero(flags == 1)
-    ends = np.flatnonzero(flags == 2)
-    out = []
-    for k, s in enumerate(starts):
-        if s == 0:
-            t_start = 0.0
-        else:   # free flight is integrated exactly; the touch lies in a step of H / 2^J
-            t_start = float(t[s] - d[s] * (t[s + 1] - t[s]) / (d[s + 1] - d[s]))
-        e = ends[k] if k < len(ends) else len(t) - 1
-        if k < len(ends):
-            lo = max(e - 3, s)
-            t_end = float(kernel.crossing(t[lo:e + 1], d[lo:e + 1], t[e - 1], t[e]))
-        else:
-            t_end = math.nan    # still in contact at the end of the window
-        pk = s + int(np.argmax(d[s:e + 1]))
-        lo, hi = max(pk - 3, s + 1), min(pk + 4, e)
-        if hi - lo >= 3:
-            _, d_max = kernel.peak(t[lo:hi], d[lo:hi], t[max(pk - 1, lo)], t[min(pk + 1, hi - 1)])
-            d_max = max(float(d_max), float(d[pk]))
-        else:
-            d_max = float(d[pk])
-        out.append(Contact(t_start, t_end, alpha * d_max**1.5, d_max))
-    return tuple(out)
+def levels(n_steps: float, tol: float) -> int:
+    """Step-size levels J: the smallest step H/2^J is ~(1e-3 tol)^0.4 t_plate. The first step's force
+    is only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not to matter."""
+    smallest = (1e-3 * tol) ** 0.4
+    return int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 3), 30))
 
 
-def _estimate(fine: Metrics, coarse: Metrics) -> Metrics:
+#: a mode is resolved by the base step H when omega H <= RESOLVED_PHASE
+RESOLVED_PHASE = 2.0
+#: |effect of one mode (dynamic) - its static flexibility| <= UNRESOLVED_COEFF s w^-3.5, relative, on
+#: t_m, f_m, delta_m (s = (m0/m) phi^2, w = omega delta_m/v0); measured ratio <= 2.0 for w = 5..80
+#: (tests/test_convergence.py::test_single_mode_dynamic_effect_bound)
+UNRESOLVED_COEFF = 2.5
+
+
+def _mode_weights(omega: np.ndarray, g: np.ndarray, mass: float, plate) -> np.ndarray:
+    """UNRESOLVED_COEFF s_j w_j^-3.5 per mode (g = phi^2/(m omega), so s = m0 g omega)."""
+    w = omega * plate.delta_m / plate.v0
+    return UNRESOLVED_COEFF * mass * g * omega * w**-3.5
+
+
+def unresolved_bound(s_w: np.ndarray, omega: np.ndarray, H: float) -> float:
+    """Relative error bound from the modes the base step H does not resolve well (omega H ~> 1).
+
+    They are still integrated (exactly, for the interpolated force), but the force's fast ringing
+    they cause is aliased by the interpolation; their whole dynamic effect beyond a static spring
+    bounds that error.
+    """
+    # a mode with phase omega H per step is aliased in proportion to the interpolation error of
+    # its ringing, ~(omega H)^6: weight (omega H / RESOLVED_PHASE)^6, capped at its whole effect
+    return kernel.unresolved(s_w, omega, H, RESOLVED_PHASE)
+
+
+def _estimate(fine: Metrics, coarse: Metrics, unresolved: float = 0.0) -> Metrics:
     """Time-step uncertainty of `fine`. One relative bound for all three metrics (the largest of the
-    three Richardson estimates): a single metric's estimate can vanish where its error changes sign."""
+    three Richardson estimates): a single metric's estimate can vanish where its error changes sign;
+    plus the bound for modes the step does not resolve."""
     rel = max(abs(fine.t_m - coarse.t_m) / fine.t_m, abs(fine.f_m - coarse.f_m) / fine.f_m,
-              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0)
+              abs(fine.delta_m - coarse.delta_m) / fine.delta_m) / (2.0**ESTIMATE_ORDER - 1.0) + unresolved
     return Metrics(rel * fine.t_m, rel * fine.f_m, rel * fine.delta_m)
 
 
@@ -146,16 +176,38 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
 
     Returns the finer run and its (absolute) time-step uncertainty.
     """
-    n = max(8.0, _N_ANCHOR * (2.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    plate = plate_impact(mass, alpha, v0)
+    omega, g, ew = _select(modes)
+    # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2
+    n = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    # and resolve enough modes that those the step does not resolve stay within tol / 4
+    s_w = _mode_weights(omega, g, mass, plate)
+    n = plate.t_m / kernel.largest_step(s_w, omega, plate.t_m / n, RESOLVED_PHASE, tol / 4)
     for _ in range(12):
-        fine = integrate(modes, mass, alpha, v0, n, window, tol)
-        coarse = integrate(modes, mass, alpha, v0, n / 2.0, 0.0, tol)
-        unc = _estimate(fine.metrics, coarse.metrics)
-        ratio = _rel(unc, fine.metrics) / tol
+        H = plate.t_m / n
+        J = levels(n, tol)
+        max_nodes = int(6 * n + 60 * J + 50 + (2.5 * window / H if window > 0 else 0))
+        for _ in range(6):
+            st, cnt, t, d, f, x, u, e, flags, fine, coarse = kernel.solve_pair(
+                omega, g, ew, mass, alpha, v0, modes.residual_flexibility, H, J, P_DEGREE,
+                GRADING_WINDOW * plate.t_m, window, max_nodes)
+            if st == kernel.STATUS_OK:
+                break
+            max_nodes *= 4
+        else:  # pragma: no cover - would need a pathological scene
+            raise ImpactvalError(f"reference solver did not finish the contact within {max_nodes} steps")
+        contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in fine.tolist())
+        first = contacts[0]
+        m_fine = Metrics(first.t_end - first.t_start, first.f_max, first.delta_max)
+        c0 = coarse[0]
+        m_coarse = Metrics(c0[1] - c0[0], alpha * c0[2] ** 1.5, c0[2])
+        unc = _estimate(m_fine, m_coarse, unresolved_bound(s_w, omega, H))
+        ratio = _rel(unc, m_fine) / tol
         if ratio <= 1.0 or n > 1e6:
-            return fine, unc
+            break
         n *= min(max(1.25, 1.1 * ratio ** (1.0 / ESTIMATE_ORDER)), 4.0)
-    return fine, unc
+    end = int(np.argmax(flags == 2))
+    return Run(m_fine, cnt - 1, t, d, f, x, u, e, contacts, -float(u[end])), unc
 
 
 def _check_tol(tol: float) -> float:

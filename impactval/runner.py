@@ -1,0 +1,322 @@
+"""Run the reference and engine jobs over scenes; one row per (scene, engine) (style.md, pattern 5).
+
+`run(scenes, engines, ...)` returns a pandas DataFrame. Every engine job runs in its own process
+with a timeout (`impactval.engines.base.run_isolated`), so a crash, hang or explosion becomes a
+status row and the run goes on. With `out`, each row is appended to `out/results.csv` as soon as
+it exists (a killed run loses nothing) and `out/report.md` is written at the end.
+"""
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import pandas as pd
+
+from impactval.compare import curve_error, relative_errors
+from impactval.engines import ENGINE_MODULES, ENGINES
+from impactval.engines.base import EngineSettings, run_isolated
+from impactval.errors import EngineError, ImpactvalError
+from impactval.reference.result import ImpactResult
+
+SCHEMA_VERSION = 1
+#: statuses that make `impactval run` exit with 1 ("not-installed" and "skipped" only inform)
+FAILED_STATUSES = ("crashed", "timeout", "unstable", "no-contact")
+#: results.csv columns, in order
+COLUMNS = (
+    "schema_version", "run_id", "scene", "engine", "version", "model", "contact", "integrator", "dt",
+    "segments", "status", "message",
+    "t_m", "f_m", "delta_m", "ref_t_m", "ref_f_m", "ref_delta_m",
+    "err_t_m", "err_f_m", "err_delta_m", "err_curve",
+    "contact_stiffness", "lin_t_m", "lin_f_m", "lin_delta_m",
+    "lin_err_t_m", "lin_err_f_m", "lin_err_delta_m", "lin_err_curve",
+    "rebound_velocity", "energy_error", "n_contacts", "n_steps",
+    "wall_time_build_s", "wall_time_step_s", "wall_time_s",
+    "structure_frequencies", "continuum_frequencies",
+)
+
+
+def resolve_engine(spec: str) -> str:
+    """Check an engine name ("mujoco") or import path ("pkg.module:Class"); return it unchanged."""
+    if not isinstance(spec, str) or not spec.strip():
+        raise EngineError(f"engine names must be non-empty strings, got {spec!r}.")
+    if spec in ENGINES or (":" in spec and all(spec.split(":", 1))):
+        return spec
+    installed = [n for n, m in ENGINE_MODULES.items() if importlib.util.find_spec(m)]
+    raise EngineError(f"unknown engine {spec!r}; known: {', '.join(ENGINES)} (installed: "
+                      f"{', '.join(installed) or 'none'}), or an adapter as 'package.module:Class'.")
+
+
+def _unavailable(spec: str, scene, settings: EngineSettings) -> ImpactResult | None:
+    """A status row for an engine that cannot run here (not installed, no adapter yet, or the
+    settings are not supported), else None. Checked in this process, before spawning a job."""
+    if spec in ENGINES:
+        mod = ENGINE_MODULES.get(spec, spec)
+        if importlib.util.find_spec(mod) is None:
+            return ImpactResult.failed(scene.name, spec, "not-installed",
+                                       f"{mod} is not installed: pip install 'impactval[{spec}]'",
+                                       settings=settings.as_dict())
+        adapter_mod = ENGINES[spec].split(":", 1)[0]
+        try:
+            found = importlib.util.find_spec(adapter_mod) is not None
+        except ModuleNotFoundError:
+            found = False
+        if not found:
+            return ImpactResult.failed(scene.name, spec, "skipped",
+                                       f"no adapter module {adapter_mod} in this impactval version",
+                                       settings=settings.as_dict())
+    from impactval.engines.base import load_adapter
+
+    try:
+        load_adapter(spec).check_settings(settings)
+    except EngineError as err:
+        return ImpactResult.failed(scene.name, spec, "skipped", str(err), settings=settings.as_dict())
+    except Exception as err:  # noqa: BLE001 - a broken adapter module is that engine's row, not the run's
+        return ImpactResult.failed(scene.name, spec, "crashed", f"cannot load adapter: {type(err).__name__}: {err}",
+                                   settings=settings.as_dict())
+    return None
+
+
+def _check_settings_somewhere(specs: list[str], settings: EngineSettings) -> None:
+    """Bad input fails fast: settings that no requested (loadable) engine accepts are an error
+    (e.g. a misspelt integrator); settings only some engines accept become "skipped" rows."""
+    from impactval.engines.base import load_adapter
+
+    errors = []
+    for spec in specs:
+        try:
+            adapter = load_adapter(spec)
+        except Exception:  # noqa: BLE001 - a missing or broken adapter is reported as its row
+            return
+        try:
+            adapter.check_settings(settings)
+            return
+        except EngineError as err:
+            errors.append(str(err))
+    if errors:
+        raise EngineError(errors[0] if len(errors) == 1 else "no engine accepts these settings: " + " ".join(errors))
+
+
+def _linear_reference(scene, tol: float, stiffness: float):
+    """The linear-theory reference for the same spring, or None when impactval.reference.linear
+    is not available in this version."""
+    try:
+        from impactval.reference.linear import solve_linear
+    except ImportError:
+        return None
+    return solve_linear(scene, tol=tol, stiffness=stiffness)
+
+
+def _num(x: Any) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
+             lin: ImpactResult | None) -> dict[str, Any]:
+    """One results row (see COLUMNS)."""
+    err = relative_errors(res, ref) if res.success else dict.fromkeys(("t_m", "f_m", "delta_m"), math.nan)
+    diag = res.diagnostics or {}
+    row: dict[str, Any] = dict.fromkeys(COLUMNS, math.nan)
+    rs = res.settings or {}
+    row.update(
+        schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, engine=res.source or spec,
+        version=res.version, model=res.model, contact=settings.contact,
+        integrator=rs.get("integrator") or settings.integrator or "", dt=settings.dt,
+        segments=rs.get("segments") if rs.get("segments") is not None else (settings.segments or ""),
+        status=res.status, message=res.message,
+        t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
+        err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
+        err_curve=curve_error(res, ref) if res.success else math.nan,
+        contact_stiffness=_num(diag.get("contact_stiffness")),
+        rebound_velocity=res.rebound_velocity, energy_error=res.energy_error, n_contacts=len(res.contacts),
+        n_steps=res.n_steps, wall_time_build_s=res.wall_time_build_s, wall_time_step_s=res.wall_time_step_s,
+        wall_time_s=res.wall_time_s,
+        structure_frequencies=json.dumps(diag["structure_frequencies"]) if "structure_frequencies" in diag else "",
+        continuum_frequencies=json.dumps(diag["continuum_frequencies"]) if "continuum_frequencies" in diag else "",
+    )
+    if lin is not None and lin.success:
+        row.update(lin_t_m=lin.t_m, lin_f_m=lin.f_m, lin_delta_m=lin.delta_m)
+        if res.success:
+            le = relative_errors(res, lin)
+            row.update(lin_err_t_m=le["t_m"], lin_err_f_m=le["f_m"], lin_err_delta_m=le["delta_m"],
+                       lin_err_curve=curve_error(res, lin))
+    return row
+
+
+class _CsvSink:
+    """Appends rows to results.csv; an existing file with other columns is moved aside first."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.exists():
+            with path.open(newline="") as fh:
+                header = next(csv.reader(fh), None)
+            if header != list(COLUMNS):
+                path.rename(path.with_name(f"{path.stem}-old-{time.strftime('%Y%m%dT%H%M%S')}{path.suffix}"))
+
+    def write(self, row: dict[str, Any]) -> None:
+        new = not self.path.exists()
+        with self.path.open("a", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=COLUMNS)
+            if new:
+                w.writeheader()
+            w.writerow(row)
+            fh.flush()
+
+
+def _as_scene(s):
+    import impactval
+
+    return s if hasattr(s, "target") and hasattr(s, "ball") else impactval.load_scene(s)
+
+
+def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
+        dt: float | None = None, contact: str | None = None, integrator: str | None = None,
+        segments: int | None = None, timeout_s: float | None = None, tol: float = 1e-6,
+        out: str | Path | None = None, on_row: Callable[[dict[str, Any]], None] | None = None) -> pd.DataFrame:
+    """Run the reference and every engine on every scene; one row per (scene, engine).
+
+    Parameters
+    ----------
+    scenes : iterable of Scene, catalogue names or TOML paths
+    engines : engine names ("mujoco", ...) or adapters as "package.module:Class" (or one
+        comma-separated string)
+    settings : EngineSettings, optional
+        Base settings; `dt` [s], `contact`, `integrator`, `segments`, `timeout_s` [s] override it.
+    tol : float
+        Relative tolerance of the reference solutions (Hertz and, for native contact, linear).
+    out : directory, optional
+        Append each row to `out/results.csv` as soon as it exists; write `out/report.md` at the end.
+    on_row : callable, optional
+        Called with each row dict as soon as it exists (e.g. to print progress).
+
+    Returns a DataFrame with the columns of `COLUMNS`; errors are signed relative differences
+    (engine - reference) / reference; `err_curve` is the whole-curve error (see
+    `impactval.compare.curve_error`); `lin_*` compare a native (linear) contact with the
+    linear-theory reference for the same spring (NaN for other contact modes).
+    """
+    if isinstance(engines, str):
+        engines = [e.strip() for e in engines.split(",") if e.strip()]
+    specs = [resolve_engine(e) for e in engines]
+    if not specs:
+        raise EngineError("no engine given; known: " + ", ".join(ENGINES) + ".")
+    base = settings or EngineSettings()
+    over = {k: v for k, v in dict(dt=dt, contact=contact, integrator=integrator, segments=segments,
+                                  timeout_s=timeout_s).items() if v is not None}
+    settings = replace(base, **over)
+    _check_settings_somewhere(specs, settings)
+    scene_objs = [_as_scene(s) for s in scenes]
+    if not scene_objs:
+        raise ImpactvalError("no scene given; see `impactval scenes`.")
+    sink = _CsvSink(Path(out) / "results.csv") if out is not None else None
+    run_id = time.strftime("%Y%m%dT%H%M%S")
+    import impactval
+
+    rows = []
+    for scene in scene_objs:
+        ref = impactval.solve(scene, tol=tol)
+        lin_cache: dict[float, ImpactResult | None] = {}
+        for spec in specs:
+            res = _unavailable(spec, scene, settings) or run_isolated(spec, scene, settings)
+            lin = None
+            if settings.contact == "native" and res.success:
+                k = _num((res.diagnostics or {}).get("contact_stiffness"))
+                if math.isfinite(k) and k > 0:
+                    if k not in lin_cache:
+                        lin_cache[k] = _linear_reference(scene, tol, k)
+                    lin = lin_cache[k]
+            row = make_row(run_id, scene, spec, settings, res, ref, lin)
+            if sink is not None:
+                sink.write(row)
+            if on_row is not None:
+                on_row(row)
+            rows.append(row)
+    df = pd.DataFrame(rows, columns=list(COLUMNS))
+    if out is not None:
+        (Path(out) / "report.md").write_text(markdown_report(df, settings))
+    return df
+
+
+def any_failed(df: pd.DataFrame) -> bool:
+    """True when a row has a failing status (see FAILED_STATUSES)."""
+    return bool(df["status"].isin(FAILED_STATUSES).any())
+
+
+def _pct(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{100 * x:+.3f}"
+
+
+def _pct_abs(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{100 * x:.3f}"
+
+
+def _ms(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{1e3 * x:.1f}"
+
+
+def table_rows(df: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
+    """Header and text cells of the summary table (errors in %, wall times in ms)."""
+    header = ["scene", "engine", "contact", "integrator", "dt [s]", "N", "status", "t_m %", "f_m %", "delta_m %",
+              "curve %", "lin t_m %", "lin f_m %", "lin delta_m %", "build ms", "step ms", "steps"]
+    cells = []
+    for _, r in df.iterrows():
+        seg = r["segments"]
+        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), f"{r['dt']:g}",
+                      "" if seg in ("", None) or (isinstance(seg, float) and math.isnan(seg)) else str(seg),
+                      str(r["status"]), _pct(r["err_t_m"]), _pct(r["err_f_m"]), _pct(r["err_delta_m"]),
+                      _pct_abs(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
+                      _pct(r["lin_err_delta_m"]), _ms(r["wall_time_build_s"]), _ms(r["wall_time_step_s"]),
+                      str(int(r["n_steps"])) if math.isfinite(_num(r["n_steps"])) else ""])
+    return header, cells
+
+
+def text_table(df: pd.DataFrame) -> str:
+    """The summary table as aligned plain text."""
+    header, cells = table_rows(df)
+    widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(header)]
+    lines = ["  ".join(h.rjust(w) if i > 6 else h.ljust(w) for i, (h, w) in enumerate(zip(header, widths)))]
+    for c in cells:
+        lines.append("  ".join(x.rjust(w) if i > 6 else x.ljust(w) for i, (x, w) in enumerate(zip(c, widths))))
+    return "\n".join(lines)
+
+
+def markdown_report(df: pd.DataFrame, settings: EngineSettings | None = None) -> str:
+    """report.md: the summary table in markdown, then the messages of rows that did not succeed."""
+    header, cells = table_rows(df)
+    out = ["# impactval run", ""]
+    if settings is not None:
+        out += [f"Settings: dt = {settings.dt:g} s, contact = {settings.contact}, integrator = "
+                f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
+                f"timeout = {settings.timeout_s:g} s.", ""]
+    out += ["Errors are signed relative differences (engine - reference) / reference in %; `curve` is the RMS of "
+            "f(t) - f_ref(t) over the first contact divided by the reference f_m; `lin` columns compare a native "
+            "(linear) contact with the linear-theory reference for the same spring.", ""]
+    out.append("| " + " | ".join(header) + " |")
+    out.append("|" + "|".join("---" if i < 7 else "---:" for i in range(len(header))) + "|")
+    for c in cells:
+        out.append("| " + " | ".join(x.replace("|", "\\|") for x in c) + " |")
+    bad = df[df["status"] != "ok"]
+    if len(bad):
+        out += ["", "## Rows without a result", ""]
+        for _, r in bad.iterrows():
+            out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {r['message']}")
+    freq = df[df["structure_frequencies"].astype(str).str.len() > 0]
+    if len(freq):
+        out += ["", "## Structure model frequencies [rad/s] (engine model vs continuum)", ""]
+        for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
+            s, c = json.loads(r["structure_frequencies"]), json.loads(r["continuum_frequencies"])
+            pairs = ", ".join(f"{a:.1f} ({100 * (a / b - 1):+.2f} %)" for a, b in zip(s[:3], c[:3]))
+            out.append(f"- {r['scene']} / {r['engine']} (N = {r['segments']}): {pairs}")
+    return "\n".join(out) + "\n"

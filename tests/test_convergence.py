@@ -1,0 +1,113 @@
+"""Order of accuracy, the error estimate, and modal truncation (issue 8)."""
+import math
+
+import numpy as np
+import pytest
+
+import impactval
+from impactval.reference import kernel
+from impactval.reference.hertz import plate_impact
+from impactval.reference.solve import P_DEGREE, integrate, structure_modes, solve_modes
+
+
+def _max_rel(m, ref):
+    e = m.relative_to(ref)
+    return max(abs(e.t_m), abs(e.f_m), abs(e.delta_m))
+
+
+def test_scheme_reaches_order_six_despite_the_t15_onset():
+    """Errors against the closed form fall by ~2^6 per halving of the base step (order p + 1)."""
+    scene = impactval.load_scene("plate_steel")
+    p = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    md = structure_modes(scene)
+    errs = [_max_rel(integrate(md, p.mass, p.alpha, p.v0, n, J=14).metrics, p) for n in (20, 40, 80)]
+    orders = [math.log2(a / b) for a, b in zip(errs, errs[1:])]
+    assert P_DEGREE + 1 == 6
+    assert min(orders) >= 5.5, f"observed orders {orders}"
+
+
+def test_energy_error_converges_at_the_scheme_order():
+    scene = impactval.load_scene("modal_two_mode")
+    md = structure_modes(scene)
+    e = []
+    for n in (20, 40, 80):
+        run = integrate(md, scene.ball.mass, scene.alpha, scene.ball.velocity, n, J=14)
+        e.append(np.max(np.abs(run.energy / run.energy[0] - 1)))
+    orders = [math.log2(a / b) for a, b in zip(e, e[1:])]
+    assert min(orders) >= 5.0, f"energy orders {orders}"
+
+
+def test_moments_match_quadrature():
+    from scipy import integrate as si
+    omega = np.array([1.0, 3e3, 4e5, 2e7, 9e8])
+    g = np.ones_like(omega)
+    H = 2.5e-6
+    Er, Ei, Kr, Ki, S = kernel.moments(omega, g, H, 2, 5)
+    for j in range(3):
+        eta = H / 2**j
+        for i, w in enumerate(omega):
+            assert Er[j, i] == pytest.approx(math.cos(w * eta), abs=1e-15)
+            for l in range(6):
+                f = lambda s, part: (np.cos if part == 0 else np.sin)(w * (eta - s)) * (s / eta) ** l
+                lim = max(50, int(w * eta))
+                re = si.quad(f, 0, eta, args=(0,), limit=lim, epsabs=0, epsrel=1e-13)[0]
+                im = si.quad(f, 0, eta, args=(1,), limit=lim, epsabs=0, epsrel=1e-13)[0]
+                scale = eta / (l + 1)
+                assert Kr[j, l, i] == pytest.approx(re, abs=1e-12 * scale)
+                assert Ki[j, l, i] == pytest.approx(im, abs=1e-12 * scale)
+
+
+@pytest.mark.parametrize("name", ["plate_steel", "modal_two_mode", "heavy_ball_slender_beam"])
+@pytest.mark.parametrize("tol", [1e-5, 1e-7, 1e-9])
+def test_reported_uncertainty_bounds_the_real_error(name, tol):
+    scene = impactval.load_scene(name)
+    modes = 8 if scene.target.kind == "beam" else None
+    truth = impactval.solve(scene, tol=1e-12, modes=modes)
+    r = impactval.solve(scene, tol=tol, modes=modes)
+    for key in ("t_m", "f_m", "delta_m"):
+        err = abs(getattr(r, key) - getattr(truth, key))
+        assert err <= getattr(r.uncertainty, key) <= tol * getattr(r, key)
+
+
+def test_residual_flexibility_makes_few_modes_converge_fast():
+    """Mode-acceleration correction: n modes + the static flexibility of the rest converge much faster."""
+    scene = impactval.load_scene("beam_ss_midspan")
+    m0, a, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+    truth, _ = solve_modes(structure_modes(scene, 2000, residual=True), m0, a, v0, 1e-10)
+    plain, corrected = [], []
+    for n in (24, 48, 96):
+        plain.append(_max_rel(solve_modes(structure_modes(scene, n), m0, a, v0, 1e-10)[0].metrics, truth.metrics))
+        corrected.append(_max_rel(solve_modes(structure_modes(scene, n, residual=True), m0, a, v0, 1e-10)[0].metrics,
+                                  truth.metrics))
+    assert all(c < p / 20 for c, p in zip(corrected[1:], plain[1:]))
+    assert corrected[1] / corrected[2] > 30          # ~n^-6 with the correction
+    assert plain[1] / plain[2] < 10                  # ~n^-3 without
+
+
+@pytest.mark.parametrize("name", ["beam_ss_midspan", "beam_cantilever_tip", "light_ball_heavy_beam"])
+def test_automatic_mode_count_meets_tolerance(name):
+    scene = impactval.load_scene(name)
+    r = impactval.solve(scene, tol=1e-6)
+    truth, _ = solve_modes(structure_modes(scene, 8 * r.modes, residual=True), scene.ball.mass, scene.alpha,
+                           scene.ball.velocity, 1e-10)
+    for key in ("t_m", "f_m", "delta_m"):
+        err = abs(getattr(r, key) - getattr(truth.metrics, key))
+        assert err <= getattr(r.uncertainty, key) <= 1e-6 * getattr(r, key)
+
+
+@pytest.mark.parametrize("w", [5.0, 10.0, 20.0, 40.0, 80.0])
+def test_single_mode_dynamic_effect_bound(w):
+    """The constant behind the unresolved-mode bound: one mode's dynamic effect beyond its static
+    flexibility is below UNRESOLVED_COEFF s w^-3.5 (relative) on all three metrics."""
+    from impactval.reference.beams import Modes
+    from impactval.reference.solve import UNRESOLVED_COEFF
+
+    m0, alpha, v0 = 0.0327, 1.5384e10, 1.0
+    p = plate_impact(m0, alpha, v0)
+    s = 1e-3
+    omega, mj = w * v0 / p.delta_m, m0 / s
+    dyn, _ = solve_modes(Modes(np.array([omega]), np.array([mj]), np.array([1.0])), m0, alpha, v0, 1e-11)
+    static, _ = solve_modes(Modes(np.zeros(0), np.zeros(0), np.zeros(0), 1.0 / (mj * omega**2)), m0, alpha, v0,
+                            1e-11)
+    assert 0.5 * UNRESOLVED_COEFF * s * w**-3.5 > 10 * 1e-11     # the effect is far above the solver error
+    assert _max_rel(dyn.metrics, static.metrics) <= UNRESOLVED_COEFF * s * w**-3.5

@@ -1,0 +1,165 @@
+"""MuJoCo adapter: the bars of issue 4 on the worked case (physics.md), measured."""
+import math
+
+import numpy as np
+import pytest
+
+import impactval
+from conftest import requires_mujoco, run_py
+from impactval.engines.base import EngineSettings
+from impactval.errors import EngineError
+from impactval.reference.hertz import plate_impact
+
+pytestmark = requires_mujoco
+
+
+@pytest.fixture(scope="module")
+def adapter():
+    from impactval.engines.mujoco_ import MujocoAdapter
+
+    return MujocoAdapter()
+
+
+@pytest.fixture(scope="module")
+def plate_scene():
+    return impactval.load_scene("plate_steel")
+
+
+@pytest.fixture(scope="module")
+def plate(plate_scene):
+    return plate_impact(plate_scene.ball.mass, plate_scene.alpha, plate_scene.ball.velocity)
+
+
+def rel(a, b):
+    return abs(a / b - 1.0)
+
+
+@pytest.mark.parametrize("integrator", ["Euler", "implicitfast", "RK4"])
+def test_plate_injected_hertz_within_0_05_percent(adapter, plate_scene, plate, integrator):
+    """Issue 4 bar: plate, injected Hertz, dt = 1e-6: t_m, f_m, delta_m within 0.05 % of the closed form."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, integrator=integrator))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, plate.t_m), (r.f_m, plate.f_m), (r.delta_m, plate.delta_m)):
+        assert rel(got, want) <= 5e-4
+    assert r.n_steps == pytest.approx(plate.t_m / 1e-6, abs=2)
+    assert r.rebound_velocity == pytest.approx(plate_scene.ball.velocity, rel=1e-3)   # elastic
+    assert r.wall_time_step_s > 0 and r.version.startswith(("3.", "4."))
+
+
+def test_plate_native_linear_matches_closed_form_sine(adapter, plate_scene, plate):
+    """Issue 4 bar: native linear contact on the plate vs the linear theory (closed form):
+    delta = (v0/omega0) sin(omega0 t), t_m = pi/omega0, f_m = k0 delta_m: within 0.1 %."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="native"))
+    assert r.status == "ok", r.message
+    k0 = r.diagnostics["contact_stiffness"]
+    assert k0 == pytest.approx(plate.k0, rel=1e-12)
+    omega0 = math.sqrt(k0 / plate_scene.ball.mass)
+    delta_m = plate_scene.ball.velocity / omega0
+    assert rel(r.t_m, math.pi / omega0) <= 1e-3
+    assert rel(r.delta_m, delta_m) <= 1e-3
+    assert rel(r.f_m, k0 * delta_m) <= 1e-3
+    # the force really is the linear law, sample by sample
+    on = r.delta > 0.05 * delta_m
+    assert np.allclose(r.f[on], k0 * r.delta[on], rtol=1e-3)
+
+
+def test_plate_native_hertz_fit_is_close(adapter, plate_scene, plate):
+    """native-hertz: MuJoCo's solimp shape fitted to alpha*delta^1.5 (measured: ~0.2 % on the plate)."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="native-hertz"))
+    assert r.status == "ok", r.message
+    assert r.diagnostics["native_hertz_fit_rms"] < 0.01
+    for got, want in ((r.t_m, plate.t_m), (r.f_m, plate.f_m), (r.delta_m, plate.delta_m)):
+        assert rel(got, want) <= 5e-3
+
+
+@pytest.fixture(scope="module")
+def beam_ref():
+    return impactval.solve(impactval.load_scene("beam_ss_midspan"), tol=1e-5)
+
+
+def test_beam_ss_chain_81_within_1_5_percent(adapter, beam_ref):
+    """Issue 4 bar: simply supported beam at mid-span, chain N = 81, dt = 1e-6: all three errors
+    <= 1.5 %, and the chain's first three frequencies within 1 % of the continuum."""
+    sc = impactval.load_scene("beam_ss_midspan")
+    r = adapter.run(sc, EngineSettings(dt=1e-6, segments=81))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, beam_ref.t_m), (r.f_m, beam_ref.f_m), (r.delta_m, beam_ref.delta_m)):
+        assert rel(got, want) <= 0.015
+    chain = np.array(r.diagnostics["structure_frequencies"][:3])
+    cont = np.array(r.diagnostics["continuum_frequencies"][:3])
+    assert np.all(np.abs(chain / cont - 1) <= 0.01)
+    assert r.diagnostics["segments"] == 81
+    assert r.diagnostics["equality_violation_max"] < 1e-8        # the pin holds
+
+
+def test_beam_native_linear_spring_on_flexible_target(adapter):
+    """Native contact on a beam is still the linear spring k0 (small impedance; see NATIVE_IMPEDANCE)."""
+    sc = impactval.load_scene("beam_ss_midspan")
+    r = adapter.run(sc, EngineSettings(dt=1e-6, segments=41, contact="native"))
+    assert r.status == "ok", r.message
+    k0 = r.diagnostics["contact_stiffness"]
+    on = r.delta > 0.05 * r.delta_m
+    assert np.allclose(r.f[on], k0 * r.delta[on], rtol=2e-3)
+
+
+@pytest.mark.parametrize("name", ["beam_cc_midspan", "beam_cantilever_tip", "beam_ss_quarter"])
+def test_chain_frequencies_all_supports(adapter, name):
+    """Each support's chain (N = 41) has its first three frequencies within 1 % of the continuum."""
+    sc = impactval.load_scene(name)
+    d = adapter.structure_frequencies(sc, EngineSettings(segments=41))
+    chain, cont = np.array(d["structure_frequencies"][:3]), np.array(d["continuum_frequencies"][:3])
+    assert np.all(np.abs(chain / cont - 1) <= 0.01), (chain, cont)
+
+
+def test_modal_target_injected_hertz(adapter):
+    sc = impactval.load_scene("modal_two_mode")
+    ref = impactval.solve(sc, tol=1e-7)
+    r = adapter.run(sc, EngineSettings(dt=1e-7, integrator="RK4"))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m)):
+        assert rel(got, want) <= 1e-4
+
+
+def test_modal_target_native_is_refused(adapter):
+    with pytest.raises(EngineError, match="modal target"):
+        adapter.run(impactval.load_scene("modal_two_mode"), EngineSettings(contact="native"))
+
+
+def test_pure_euler_bernoulli_chain_is_unstable_at_1us(adapter):
+    """Without the section's rotary inertia the N = 81 chain exceeds Euler's limit at dt = 1e-6:
+    reported as a status, not a crash or a silent reset."""
+    sc = impactval.load_scene("beam_ss_midspan")
+    r = adapter.run(sc, EngineSettings(dt=1e-6, segments=81, options=(("rotary_inertia", "none"),)))
+    assert r.status == "unstable"
+    assert "dt = 1e-06" in r.message
+
+
+def test_callback_is_cleared(adapter, plate_scene):
+    import mujoco
+
+    adapter.run(plate_scene, EngineSettings(dt=1e-6))
+    assert mujoco.get_mjcb_passive() is None
+
+
+def test_bad_settings_are_one_line_errors(adapter, plate_scene):
+    with pytest.raises(EngineError, match="unknown integrator 'euler'"):
+        adapter.run(plate_scene, EngineSettings(integrator="euler"))
+    with pytest.raises(EngineError, match="unknown option 'timestep'"):
+        adapter.run(plate_scene, EngineSettings(options=(("timestep", 1e-6),)))
+    with pytest.raises(EngineError, match="rotary_inertia must be one of"):
+        adapter.run(plate_scene, EngineSettings(options=(("rotary_inertia", "full"),)))
+
+
+def test_core_never_imports_mujoco():
+    out = run_py("import impactval, impactval.runner, impactval.compare, impactval.cli, impactval.engines.mujoco_; "
+                 "import sys; print({'mujoco', 'pybullet', 'exudyn'} & set(sys.modules) or '')")
+    assert out == ""
+
+
+def test_euler_energy_error_is_second_order(adapter, plate_scene):
+    """Energy with half-step velocities averaged: error ~ dt^2, so dt = 2e-6 is not misread as
+    "unstable" (the plain half-step kinetic energy swings by ~5 % there)."""
+    e1, e2 = (adapter.run(plate_scene, EngineSettings(dt=dt)) for dt in (1e-6, 2e-6))
+    assert e1.status == e2.status == "ok"
+    assert e1.energy_error < 1e-3
+    assert 3.0 < e2.energy_error / e1.energy_error < 5.0

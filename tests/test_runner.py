@@ -1,0 +1,118 @@
+"""`impactval.runner.run` / `impactval run`: rows, statuses, isolation, files (issue 4)."""
+import csv
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import impactval
+import impactval.cli
+from conftest import requires_mujoco
+from impactval.compare import curve_error, relative_errors
+from impactval.errors import EngineError
+from impactval.runner import COLUMNS, run
+
+
+@pytest.fixture(scope="module")
+def plate_ref():
+    return impactval.solve(impactval.load_scene("plate_steel"), tol=1e-6)
+
+
+def test_curve_error_is_zero_for_itself_and_scales(plate_ref):
+    from dataclasses import replace
+
+    assert curve_error(plate_ref, plate_ref) == pytest.approx(0.0, abs=1e-12)
+    scaled = replace(plate_ref, f=plate_ref.f * 1.01)
+    c = plate_ref.contacts[0]
+    inside = (plate_ref.t >= c.t_start) & (plate_ref.t <= c.t_end)
+    t, f = plate_ref.t[inside], plate_ref.f[inside]
+    expected = 0.01 * math.sqrt(np.trapezoid(f**2, t) / (t[-1] - t[0])) / plate_ref.f_m if hasattr(np, "trapezoid") \
+        else 0.01 * math.sqrt(np.trapz(f**2, t) / (t[-1] - t[0])) / plate_ref.f_m
+    assert curve_error(scaled, plate_ref) == pytest.approx(expected, rel=1e-9)
+    assert 0.005 < expected < 0.01          # RMS of a half-wave below its peak
+    e = relative_errors(replace(plate_ref, t_m=plate_ref.t_m * 1.02), plate_ref)
+    assert e["t_m"] == pytest.approx(0.02) and e["f_m"] == 0.0
+
+
+def test_unknown_engine_is_a_clear_error():
+    with pytest.raises(EngineError, match=r"unknown engine 'mujuco'; known: mujoco, pybullet, exudyn"):
+        run(["plate_steel"], ["mujuco"])
+    res = CliRunner().invoke(impactval.cli.main, ["run", "plate_steel", "--engines", "mujuco"])
+    assert res.exit_code == 2 and "unknown engine 'mujuco'" in res.output
+
+
+def test_missing_engine_is_a_not_installed_row(monkeypatch, tmp_path):
+    import impactval.runner as runner
+
+    monkeypatch.setitem(runner.ENGINE_MODULES, "mujoco", "no_such_engine_module_xyz")
+    df = run(["plate_steel"], ["mujoco"], out=tmp_path)
+    assert list(df["status"]) == ["not-installed"]
+    assert "pip install 'impactval[mujoco]'" in df["message"][0]
+    assert not runner.any_failed(df)
+
+
+@requires_mujoco
+def test_killed_engine_leaves_crashed_row_and_the_others(tmp_path):
+    """Issue 4 bar: an engine process killed mid-run is a `crashed` row; the other rows are there,
+    and every row was appended to results.csv as it finished."""
+    df = run(["plate_steel"], ["mujoco", "fake_engines:KillSelf", "mujoco"], dt=1e-6, timeout_s=120, out=tmp_path)
+    assert list(df["status"]) == ["ok", "crashed", "ok"]
+    assert "SIGKILL" in df["message"][1]
+    assert abs(df["err_f_m"][0]) < 5e-4 and abs(df["err_f_m"][2]) < 5e-4
+    with (tmp_path / "results.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["status"] for r in rows] == ["ok", "crashed", "ok"] and list(rows[0]) == list(COLUMNS)
+    report = (tmp_path / "report.md").read_text()
+    assert "| plate_steel | mujoco |" in report and "**crashed**" in report
+
+
+def test_hanging_engine_is_a_timeout_row():
+    df = run(["plate_steel"], ["fake_engines:Hang"], timeout_s=3)
+    assert list(df["status"]) == ["timeout"]
+    assert "no result after 3 s" in df["message"][0]
+
+
+@requires_mujoco
+def test_native_rows_compare_with_linear_theory(plate_ref):
+    """A native (linear) row carries its error against the linear-theory reference for the same
+    spring; on the plate that is the closed-form sine, bar 0.1 %."""
+    df = run(["plate_steel"], "mujoco", contact="native", tol=1e-7)
+    r = df.iloc[0]
+    assert r["status"] == "ok"
+    pytest.importorskip("impactval.reference.linear")
+    scene = impactval.load_scene("plate_steel")
+    omega0 = math.sqrt(r["contact_stiffness"] / scene.ball.mass)
+    assert r["lin_t_m"] == pytest.approx(math.pi / omega0, rel=1e-6)
+    for k in ("lin_err_t_m", "lin_err_f_m", "lin_err_delta_m"):
+        assert abs(r[k]) <= 1e-3
+    assert r["err_f_m"] == pytest.approx(-0.2, abs=0.002)     # linear spring: 4/5 of Hertz's peak force
+    assert r["lin_err_curve"] < 2e-3
+
+
+@requires_mujoco
+def test_cli_run_writes_files_and_exit_codes(tmp_path):
+    out = tmp_path / "o"
+    res = CliRunner().invoke(impactval.cli.main, ["run", "plate_steel", "--engines", "mujoco", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "plate_steel" in res.output and "t_m %" in res.output
+    assert (out / "results.csv").exists() and (out / "report.md").exists()
+    res = CliRunner().invoke(impactval.cli.main, ["run", "plate_steel", "--engines", "fake_engines:KillSelf",
+                                                  "--out", str(out)])
+    assert res.exit_code == 1
+    with (out / "results.csv").open() as fh:
+        assert [r["status"] for r in csv.DictReader(fh)] == ["ok", "crashed"]      # appended
+
+
+@requires_mujoco
+def test_settings_no_engine_accepts_are_bad_input():
+    with pytest.raises(EngineError, match="unknown integrator 'euler'"):
+        run(["plate_steel"], ["mujoco"], integrator="euler")
+    res = CliRunner().invoke(impactval.cli.main, ["run", "plate_steel", "--integrator", "rk4"])
+    assert res.exit_code == 2 and "unknown integrator 'rk4'" in res.output
+
+
+@requires_mujoco
+def test_unsupported_scene_is_a_skipped_row():
+    df = run(["modal_two_mode"], ["mujoco"], contact="native")
+    assert list(df["status"]) == ["skipped"] and "modal target" in df["message"][0]

@@ -1,0 +1,85 @@
+"""CLI and report for the theory models (issue 3, part 4)."""
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import impactval
+from impactval.reference.hertz import plate_impact
+from impactval.reference.linear import solve_linear
+from impactval.reports.theory import compare_models, theory_index, theory_page
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "impactval.cli", *args], capture_output=True, text=True)
+
+
+def test_reference_model_linear_json_matches_the_function():
+    out = cli("reference", "modal_two_mode", "--model", "linear", "--json")
+    assert out.returncode == 0, out.stderr
+    d = json.loads(out.stdout)
+    r = solve_linear(impactval.load_scene("modal_two_mode"))
+    assert d["model"] == "linear-modal" and d["t_m"] == pytest.approx(r.t_m, rel=1e-14)
+
+
+def test_reference_model_perturbation_and_explain():
+    out = cli("reference", "light_ball_heavy_beam", "--model", "perturbation", "--explain", "--tol", "1e-3")
+    assert out.returncode == 0, out.stderr
+    assert "hertz-first-order" in out.stdout
+    assert "rigid plate enough at tol 0.001: yes" in out.stdout
+    assert "modes needed:" in out.stdout
+
+
+def test_reference_explain_default_model():
+    out = cli("reference", "beam_ss_midspan", "--explain", "--tol", "1e-3")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert "rigid plate enough at tol 0.001: no" in out.stdout
+    # the table lists mode 1 (a low mode: free mass, does not fade)
+    assert any(line.split()[:1] == ["1"] for line in lines)
+
+
+def test_reference_bad_model_is_usage_error():
+    out = cli("reference", "plate_steel", "--model", "quadratic")
+    assert out.returncode == 2
+
+
+def test_compare_models_states_model_form_error():
+    sc = impactval.load_scene("plate_steel")
+    c = compare_models(sc)
+    e = c.model_form_error
+    # rigid plate: linear law vs Hertz exactly pi/(2c) - 1, -20 %, 0 (physics.md sec. 4)
+    from impactval.reference.hertz import E0
+    assert e.t_m == pytest.approx(E0 - 1, abs=1e-6)
+    assert e.f_m == pytest.approx(-0.2, abs=1e-6)
+    assert abs(e.delta_m) < 1e-6
+    assert set(c.table["model"]) == {"nonlinear", "linear", "plate", "plate-linear"}
+
+
+def test_theory_page_and_index(tmp_path):
+    sc = impactval.load_scene("modal_two_mode")
+    page, cmp = theory_page(sc, tmp_path, tol=1e-6, plot=True)
+    text = page.read_text()
+    assert "Model-form error of a linear contact" in text
+    assert "Which modes matter" in text
+    png = tmp_path / "theory_modal_two_mode.png"
+    assert png.exists() and png.read_bytes()[:4] == b"\x89PNG"
+    row = cmp.table.set_index("model").loc["perturbation"]
+    assert abs(row["rel_t_m"]) < 1e-3             # first order is good here (s ~ 0.07)
+    idx = theory_index([cmp], tmp_path).read_text()
+    assert "modal_two_mode" in idx and "%" in idx
+
+
+def test_theory_command_writes_pages(tmp_path):
+    out = cli("theory", "plate_steel", "light_ball_heavy_beam", "--out", str(tmp_path), "--no-plot")
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "theory_plate_steel.md").exists()
+    assert (tmp_path / "theory.md").exists()
+    assert "model-form error" in out.stdout
+    # the stated number is the exact one
+    line = next(l for l in out.stdout.splitlines() if l.startswith("plate_steel"))
+    f_pct = float(line.split("f_m")[1].split("%")[0])
+    assert f_pct == pytest.approx(-20.0, abs=1e-3)
