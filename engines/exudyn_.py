@@ -271,7 +271,10 @@ class ExudynAdapter(EngineAdapter):
         f = stiffness * pen ** exponent
         energy = energy_ball + energy_structure + stiffness * pen ** (exponent + 1.0) / (exponent + 1.0)
         integrator = settings.integrator or self.integrators[0]
-        diag: dict[str, Any] = {"contact_object": contact_name, "contact_law": law, "contact_stiffness": stiffness,
+        # "contact_stiffness" [N/m] names a linear spring (the runner compares it with the linear theory);
+        # the Hertz law reports its alpha [N/m^1.5] under its own key
+        law_key = "contact_stiffness" if law == "linear" else "contact_alpha"
+        diag: dict[str, Any] = {"contact_object": contact_name, "contact_law": law, law_key: stiffness,
                                 "contact_exponent": exponent, "solver": SOLVERS[integrator]}
         model = "rigid plate"
         if structure is not None:
