@@ -2,7 +2,9 @@
 
 Scene in Exudyn (y up, SI units): the ball is a `NodePoint` + `MassPoint` starting at first touch
 with velocity -v0 in y. The target is
-- a rigid plate: a ground point on the plate surface below the ball;
+- a rigid plate: the top of a ground "sphere" of the ball's radius (Exudyn needs radii > 0; the
+  motion is along the line of centres, so the gap is exactly the plate's);
+- a modal target (kind "modal"): an FFRF body with the given omega, modal masses and phi;
 - a beam: an `ObjectFFRFreducedOrder` body whose floating frame is fixed to the ground by six
   `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the impact
   section's centroid (contact radius h/2, so the ball touches the top face). Two beam models,
@@ -20,7 +22,9 @@ with velocity -v0 in y. The target is
 
 Contact (`settings.contact`):
 - "native": Exudyn's own `ObjectContactSphereSphere` (active-set contact, impactModel 0, no damping)
-  with contactStiffness = alpha and contactStiffnessExponent = 1.5, i.e. exactly Hertz;
+  with contactStiffness = alpha and contactStiffnessExponent = 1.5, i.e. exactly Hertz; its data
+  node starts "in contact" (gap -1e-12 m): the ball touches and moves in at t = 0 (starting "open"
+  lets the first step penetrate without force, +0.03 % f_m on the plate);
 - "hertz": an `ObjectConnectorSpringDamper` whose spring force is a user function
   f = alpha * max(-dL, 0)^1.5 (dL = distance - (R + target radius): pushes only on overlap;
   symbolic by default, option ("user_function", "python") for a Python one).
@@ -34,8 +38,10 @@ Integrators (`settings.integrator`): "generalized-alpha" (default; spectral radi
 (Exudyn's TrapezoidalIndex2), "explicit-euler", "rk44", "rk67", and the automatic-step ones
 "dopri5" and "ode23" (settings.dt is the largest step; options "rtol" (default 1e-8) and "atol"
 (default rtol * 1e-3 * the plate's delta_m); tighter than rtol 1e-13 / atol 1e-18 is refused: the
-error test cannot be met in double precision and DOPRI5 never finishes). A solver that stops (exu.SolverError or a False
-return) becomes status "unstable" with Exudyn's message.
+error test cannot be met in double precision and DOPRI5 never finishes). A solver that stops
+(exu.SolverError or a False return) becomes status "unstable" with Exudyn's message.
+The window starts at 2.5 rigid-plate contact times (+ tail) and is doubled (re-run) until the first
+contact has ended, up to 160 plate times.
 
 Settings always set (engines.md): console output off, no solution file, sensors stored internally
 every step, `discontinuous.useRecommendedStepSize = False` (else native contacts can abort with
