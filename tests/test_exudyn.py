@@ -225,3 +225,18 @@ def test_structure_frequencies(adapter):
     omega = adapter.structure_frequencies(sc, EngineSettings(modes=3, options=(("beam_model", "reference-modes"),)))
     assert omega == pytest.approx(ref_omega(sc, 3), rel=1e-12)
     assert adapter.structure_frequencies(impactval.load_scene("plate_steel"), EngineSettings()).size == 0
+
+
+def test_window_grows_until_the_contact_ends(adapter, plate, monkeypatch):
+    """A window shorter than the contact is doubled (re-run) until the first contact has ended,
+    and the tail is simulated after it."""
+    import impactval.engines.exudyn_ as ex
+
+    sc, p = plate
+    full = adapter.run(sc, EngineSettings(dt=1e-6))
+    monkeypatch.setattr(ex, "WINDOW_START", 0.3)
+    short = adapter.run(sc, EngineSettings(dt=1e-6))
+    assert short.status == "ok" and short.diagnostics["window_s"] == pytest.approx(0.3 * 4 * p.t_m)   # 0.3 -> 0.6 -> 1.2 t_m
+    assert short.t_m == pytest.approx(full.t_m, rel=1e-9) and short.f_m == pytest.approx(full.f_m, rel=1e-9)
+    tail = adapter.run(sc, EngineSettings(dt=1e-6, tail=2e-4))
+    assert tail.t[-1] >= tail.contacts[0].t_end + 2e-4 - 1e-6 and len(tail.contacts) == 1
