@@ -180,7 +180,7 @@ class EngineAdapter:
             growth = float(np.max(e) / e[0] - 1.0)
             if growth > self.energy_growth_limit:
                 return ImpactResult.failed(scene.name, self.name, "unstable",
-                                           f"energy grew by {growth:.0%} (limit {self.energy_growth_limit:.0%}) "
+                                           f"energy grew {_growth_text(growth)} (limit {self.energy_growth_limit:.0%}) "
                                            f"at dt = {settings.dt:g} s", **common)
         contacts = contacts_from_series(t, d, f)
         if not contacts:
@@ -198,6 +198,11 @@ class EngineAdapter:
                             delta_m=first.delta_max, t=t, f=f, delta=d, x_ball=np.asarray(sim.x_ball, float),
                             x_structure=np.asarray(sim.x_structure, float), energy=e, rebound_velocity=rebound,
                             energy_error=energy_error, contacts=contacts, status="ok", **common)
+
+
+def _growth_text(growth: float) -> str:
+    """'by 12%' for modest growth, 'by a factor 3.4e+12' for an explosion."""
+    return f"by {growth:.0%}" if growth < 10 else f"by a factor {1 + growth:.2g}"
 
 
 def _parabola_peak(t: np.ndarray, y: np.ndarray, k: int) -> float:

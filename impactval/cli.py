@@ -200,11 +200,35 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
 
 
 # ---------------------------------------------------------------------------- impactval run
-def _run_settings(dt, contact, integrator, segments, timeout, tail):
+def _option_value(text: str):
+    """An --option value: int, float, true/false, or the string itself."""
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _parse_options(items: tuple[str, ...]) -> tuple[tuple[str, object], ...]:
+    out = []
+    for item in items:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise ImpactvalError(f"--option takes KEY=VALUE or ENGINE.KEY=VALUE (e.g. exudyn.beam_model=reference-modes), "
+                                 f"got {item!r}.")
+        out.append((key.strip(), _option_value(value.strip())))
+    return tuple(out)
+
+
+def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, options=()):
     from impactval.engines.base import EngineSettings
 
     return EngineSettings(dt=dt, contact=contact, integrator=integrator, segments=segments, timeout_s=timeout,
-                          tail=tail)
+                          tail=tail, modes=modes, options=_parse_options(options))
 
 
 @main.command(name="run")
@@ -217,13 +241,17 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail):
                    "native-hertz: engine contact shaped toward Hertz.")
 @click.option("--integrator", default=None, help="Engine integrator (e.g. MuJoCo: Euler, implicitfast, RK4).")
 @click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
+@click.option("--modes", default=None, type=click.IntRange(min=1), help="Modes of a modal (FFRF) beam (default: engine's).")
+@click.option("--option", "options", multiple=True, metavar="[ENGINE.]KEY=VALUE",
+              help="Engine-specific option, repeatable; ENGINE. limits it to one engine "
+                   "(e.g. exudyn.beam_model=reference-modes, pybullet.native_route=per-body).")
 @click.option("--timeout", default=600.0, show_default=True, type=float, help="Time limit per engine job [s].")
 @click.option("--tail", default=0.0, show_default=True, type=float,
               help="Simulated time [s] after the first contact ends (re-contacts).")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
 @click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
               help="Directory for results.csv (rows appended as they finish) and report.md.")
-def run_command(scene, engines, dt, contact, integrator, segments, timeout, tail, tol, out) -> None:
+def run_command(scene, engines, dt, contact, integrator, segments, modes, options, timeout, tail, tol, out) -> None:
     """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none = whole catalogue).
 
     Prints relative errors in % (engine - reference) / reference and wall times. Exit code 0, or 1
@@ -233,7 +261,7 @@ def run_command(scene, engines, dt, contact, integrator, segments, timeout, tail
     from impactval.scenarios.scene import catalogue_names
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
-    settings = _run_settings(dt, contact, integrator, segments, timeout, tail)
+    settings = _run_settings(dt, contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or catalogue_names()
     _warn_if_compiling()
 

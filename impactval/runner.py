@@ -94,7 +94,7 @@ def _check_settings_somewhere(specs: list[str], settings: EngineSettings) -> Non
         except Exception:  # noqa: BLE001 - a missing or broken adapter is reported as its row
             return
         try:
-            adapter.check_settings(settings)
+            adapter.check_settings(settings_for(settings, spec))
             return
         except EngineError as err:
             errors.append(str(err))
@@ -130,7 +130,9 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
         integrator=rs.get("integrator") or settings.integrator or "", dt=settings.dt,
-        segments=rs.get("segments") if rs.get("segments") is not None else (settings.segments or ""),
+        # structure size: chain segments, or the mode count of a modal (FFRF) body
+        segments=next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
+                       if v not in (None, "", 0)), ""),
         status=res.status, message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
@@ -179,6 +181,20 @@ def _as_scene(s):
     return s if hasattr(s, "target") and hasattr(s, "ball") else impactval.load_scene(s)
 
 
+def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
+    """The settings one engine gets: options named "ENGINE.key" go to that engine only (as "key"),
+    plain "key" options to every engine."""
+    name = spec.split(":")[-1].lower() if ":" in spec else spec
+    opts = []
+    for key, value in settings.options:
+        head, dot, rest = key.partition(".")
+        if not dot:
+            opts.append((key, value))
+        elif head.lower() in (name, spec):
+            opts.append((rest, value))
+    return replace(settings, options=tuple(opts))
+
+
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
         dt: float | None = None, contact: str | None = None, integrator: str | None = None,
         segments: int | None = None, timeout_s: float | None = None, tol: float = 1e-6,
@@ -214,6 +230,7 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                                   timeout_s=timeout_s).items() if v is not None}
     settings = replace(base, **over)
     _check_settings_somewhere(specs, settings)
+    per_engine = {spec: settings_for(settings, spec) for spec in specs}
     scene_objs = [_as_scene(s) for s in scenes]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")
@@ -226,7 +243,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         ref = impactval.solve(scene, tol=tol)
         lin_cache: dict[float, ImpactResult | None] = {}
         for spec in specs:
-            res = _unavailable(spec, scene, settings) or run_isolated(spec, scene, settings)
+            eng = per_engine[spec]
+            res = _unavailable(spec, scene, eng) or run_isolated(spec, scene, eng)
             lin = None
             if settings.contact == "native" and res.success:
                 k = _num((res.diagnostics or {}).get("contact_stiffness"))
@@ -234,7 +252,7 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                     if k not in lin_cache:
                         lin_cache[k] = _linear_reference(scene, tol, k)
                     lin = lin_cache[k]
-            row = make_row(run_id, scene, spec, settings, res, ref, lin)
+            row = make_row(run_id, scene, spec, eng, res, ref, lin)
             if sink is not None:
                 sink.write(row)
             if on_row is not None:

@@ -116,3 +116,21 @@ def test_settings_no_engine_accepts_are_bad_input():
 def test_unsupported_scene_is_a_skipped_row():
     df = run(["modal_two_mode"], ["mujoco"], contact="native")
     assert list(df["status"]) == ["skipped"] and "modal target" in df["message"][0]
+
+
+def test_engine_prefixed_options_reach_only_that_engine():
+    from impactval.engines.base import EngineSettings
+    from impactval.runner import settings_for
+    s = EngineSettings(options=(("exudyn.beam_model", "reference-modes"), ("max_time", 1e-4),
+                                ("pybullet.native_route", "per-body")))
+    assert dict(settings_for(s, "exudyn").options) == {"beam_model": "reference-modes", "max_time": 1e-4}
+    assert dict(settings_for(s, "pybullet").options) == {"native_route": "per-body", "max_time": 1e-4}
+    assert dict(settings_for(s, "mujoco").options) == {"max_time": 1e-4}
+
+
+def test_cli_option_syntax_error_is_one_line(tmp_path):
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco",
+                          "--option", "nonsense", "--out", str(tmp_path)], capture_output=True, text=True)
+    assert out.returncode == 2 and "--option takes KEY=VALUE" in out.stderr and "Traceback" not in out.stderr
