@@ -31,6 +31,15 @@ class Modes:
         return len(self.omega)
 
 
+def truncate_modes(modes: Modes, n: int, residual: bool = False) -> Modes:
+    """The n lowest-frequency modes of `modes`; with `residual`, the static flexibility of the
+    dropped ones is added to the residual flexibility (mode-acceleration correction)."""
+    order = np.argsort(modes.omega, kind="stable")
+    keep, drop = order[:n], order[n:]
+    extra = float(np.sum(modes.phi[drop] ** 2 / (modes.modal_mass[drop] * modes.omega[drop] ** 2))) if residual else 0.0
+    return Modes(modes.omega[keep], modes.modal_mass[keep], modes.phi[keep], modes.residual_flexibility + extra)
+
+
 @lru_cache(maxsize=64)
 def _beta_l(support: str, n: int) -> np.ndarray:
     """First n roots beta_n L of the frequency equation of `support`."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from impactval.errors import ImpactvalError
 from impactval.reference import kernel
-from impactval.reference.beams import Modes, beam_modes
+from impactval.reference.beams import Modes, beam_modes, truncate_modes
 from impactval.reference.hertz import plate_impact
 from impactval.reference.result import Contact, ImpactResult, Metrics
 
@@ -57,13 +57,16 @@ def _beam_modes_cached(beam, n: int, residual: bool) -> Modes:
 
 
 def structure_modes(scene, n: int | None = None, residual: bool = False) -> Modes:
-    """The modal data of a scene's target (empty for a rigid plate). For a beam `n` modes are used."""
+    """The modal data of a scene's target (empty for a rigid plate). For a beam the first `n` modes,
+    for a modal target the `n` lowest (all when n is None); `residual` adds the static flexibility
+    of the rest."""
     target = scene.target
     if target.kind == "rigid-plate":
         return Modes(np.zeros(0), np.zeros(0), np.zeros(0), 0.0)
     if target.kind == "modal":
-        return Modes(np.asarray(target.omega, float), np.asarray(target.modal_mass, float),
-                     np.asarray(target.phi, float), 0.0)
+        md = Modes(np.asarray(target.omega, float), np.asarray(target.modal_mass, float),
+                   np.asarray(target.phi, float), 0.0)
+        return md if n is None or n >= md.n else truncate_modes(md, int(n), residual)
     return _beam_modes_cached(target, int(n if n is not None else (target.modes or 1)), residual)
 
 

@@ -8,7 +8,6 @@ import impactval
 from conftest import requires_mujoco, run_py
 from impactval.engines.base import EngineSettings
 from impactval.errors import EngineError
-from impactval.reference.hertz import plate_impact
 
 pytestmark = requires_mujoco
 
@@ -18,16 +17,6 @@ def adapter():
     from impactval.engines.mujoco_ import MujocoAdapter
 
     return MujocoAdapter()
-
-
-@pytest.fixture(scope="module")
-def plate_scene():
-    return impactval.load_scene("plate_steel")
-
-
-@pytest.fixture(scope="module")
-def plate(plate_scene):
-    return plate_impact(plate_scene.ball.mass, plate_scene.alpha, plate_scene.ball.velocity)
 
 
 def rel(a, b):

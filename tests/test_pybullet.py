@@ -28,11 +28,6 @@ def adapter():
 
 
 @pytest.fixture(scope="module")
-def plate_scene():
-    return impactval.load_scene("plate_steel")
-
-
-@pytest.fixture(scope="module")
 def beam_scene():
     return impactval.load_scene("beam_ss_midspan")
 

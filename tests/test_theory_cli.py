@@ -1,14 +1,11 @@
 """CLI and report for the theory models (issue 3, part 4)."""
 import json
-import math
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 import impactval
-from impactval.reference.hertz import plate_impact
 from impactval.reference.linear import solve_linear
 from impactval.reports.theory import compare_models, theory_index, theory_page
 
