@@ -183,6 +183,14 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     c = np.empty(p + 1)
     Kcr = np.empty(n)
     Kci = np.empty(n)
+    inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
+    inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
+    for l in range(p + 1):
+        inv1[l] = 1.0 / (l + 1)
+        inv2[l] = 1.0 / ((l + 1) * (l + 2))
+    cu = 0.0
+    cx = 0.0
+    cs = 0.0
     Kc_j = -1
     m_prev = -1
 
@@ -303,15 +311,18 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 acc += pi_[i]
             wu = 0.0
             wx = 0.0
-            cu = 0.0
-            cx = 0.0
-            cs = 0.0
             for l in range(m + 1):
-                wu += a_known[l] / (l + 1)
-                wx += a_known[l] / ((l + 1) * (l + 2))
-                cu += c[l] / (l + 1)
-                cx += c[l] / ((l + 1) * (l + 2))
-                cs += c[l] * S[jt, l]
+                wu += a_known[l] * inv1[l]
+                wx += a_known[l] * inv2[l]
+            if need_kc:
+                # the new node's ball and structure weights change with the stencil or the step only
+                cu = 0.0
+                cx = 0.0
+                cs = 0.0
+                for l in range(m + 1):
+                    cu += c[l] * inv1[l]
+                    cx += c[l] * inv2[l]
+                    cs += c[l] * S[jt, l]
             u_pre = u - eta * wu / m0
             x1_pre = x1 + u * eta - eta * eta * wx / m0
             B = eta * eta * cx / m0 + cs + R
