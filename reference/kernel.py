@@ -34,8 +34,8 @@ STATUS_NO_CONTACT = 2
 
 
 @njit(cache=True)
-def _moments_one(theta: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -> None:
-    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p.
+def _moments_one(theta: float, c: float, sn: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -> None:
+    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p (c, sn: cos and sin of theta).
 
     |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
     (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)!, then the
@@ -59,7 +59,6 @@ def _moments_one(theta: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -
             out_re[l - 1] = (1.0 - theta * ki) / l     # (1 + i theta K_l) / l
             out_im[l - 1] = (theta * kr) / l
     else:
-        c, sn = np.cos(theta), np.sin(theta)
         # K_0 = (e^{i theta} - 1)/(i theta) = (sin theta + i (1 - cos theta)) / theta
         kr, ki = sn / theta, (1.0 - c) / theta
         out_re[0] = kr
@@ -91,9 +90,11 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
         eta = H / 2.0**j
         for i in range(n):
             theta = omega[i] * eta
-            Er[j, i] = np.cos(theta)
-            Ei[j, i] = np.sin(theta)
-            _moments_one(theta, p, br, bi)
+            c = np.cos(theta)
+            sn = np.sin(theta)
+            Er[j, i] = c
+            Ei[j, i] = sn
+            _moments_one(theta, c, sn, p, br, bi)
             w = g[i] * eta
             for l in range(p + 1):
                 Kr[j, l, i] = w * br[l]
@@ -571,7 +572,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
-    base step count n).
+    base step count n, index of the node ending the first contact, largest |E/E0 - 1|).
     """
     # weights of the unresolved-mode bound: coeff s w^-3.5, s = m0 g omega, w = omega delta/v0
     nm = omega.shape[0]
@@ -598,7 +599,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
             max_nodes *= 4
         st, cnt, t, d, f, x, u, e, fl, fine, coarse = out
         if st != STATUS_OK:
-            return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n
+            return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf
         tm_f = fine[0, 1] - fine[0, 0]
         tm_c = coarse[0, 1] - coarse[0, 0]
         dm_f = fine[0, 2]
@@ -609,7 +610,18 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         rel += unresolved(s_w, omega, H, phase)
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
-            return st, cnt, t, d, f, x, u, e, fl, fine, rel, n
+            break
         grow = 1.1 * ratio ** (1.0 / est_order)
         n *= min(max(1.25, grow), 4.0)
-    return st, cnt, t, d, f, x, u, e, fl, fine, rel, n
+    # the first contact's end node (ball velocity there = rebound) and the largest energy drift
+    end = 0
+    for k in range(cnt):
+        if fl[k] == 2:
+            end = k
+            break
+    drift = 0.0
+    for k in range(cnt):
+        dev = abs(e[k] / e[0] - 1.0)
+        if dev > drift:
+            drift = dev
+    return st, cnt, t, d, f, x, u, e, fl, fine, rel, n, end, drift

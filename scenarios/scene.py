@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -124,13 +125,13 @@ class Scene:
     tags: tuple[str, ...] = ()
     source: str = ""
 
-    @property
+    @cached_property
     def e_star(self) -> float:
         """Contact modulus E* [Pa]: 1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2."""
         m1, m2 = self.ball.material, self.target.material
         return 1.0 / ((1 - m1.poisson**2) / m1.young + (1 - m2.poisson**2) / m2.young)
 
-    @property
+    @cached_property
     def alpha(self) -> float:
         """Hertz coefficient alpha [N/m^1.5], ball on a flat face (paper eq. 20)."""
         return 4.0 / 3.0 * self.e_star * math.sqrt(self.ball.radius)
