@@ -251,11 +251,16 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
 @click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
               help="Directory for results.csv (rows appended as they finish) and report.md.")
-def run_command(scene, engines, dt, contact, integrator, segments, modes, options, timeout, tail, tol, out) -> None:
+@click.option("--baseline", default=None, type=click.Path(dir_okay=False),
+              help="results.csv of an earlier run: mark rows worse (+), better (-), newly failing (!), fixed (*).")
+@click.option("--threshold", default=0.2, show_default=True, type=float,
+              help="Relative change of a row's largest error that counts as worse or better.")
+def run_command(scene, engines, dt, contact, integrator, segments, modes, options, timeout, tail, tol, out,
+                baseline, threshold) -> None:
     """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none = whole catalogue).
 
     Prints relative errors in % (engine - reference) / reference and wall times. Exit code 0, or 1
-    when a row crashed, timed out, went unstable or found no contact.
+    when a row crashed, timed out, went unstable or found no contact, or (with --baseline) got worse.
     """
     from impactval.runner import any_failed, resolve_engine, run, text_table
     from impactval.scenarios.scene import catalogue_names
@@ -268,10 +273,21 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     def progress(row):
         click.echo(f"  {row['scene']} / {row['engine']}: {row['status']}", err=True)
 
-    df = run(names, specs, settings, tol=tol, out=out, on_row=progress)
+    df = run(names, specs, settings, tol=tol, out=out, on_row=progress, baseline=baseline, threshold=threshold)
     click.echo(text_table(df))
+    regressed = False
+    if "baseline" in df.attrs:
+        from impactval.history import regressions
+
+        cmp = df.attrs["baseline"]
+        flagged = cmp[cmp["mark"] != ""]
+        for _, r in flagged.iterrows():
+            click.echo(f"  {r['mark']} {r['scene']} / {r['engine']}: {r['old_status']} -> {r['status']}, "
+                       f"largest error {100 * r['old_score']:.3f} % -> {100 * r['score']:.3f} %")
+        click.echo(f"against {baseline}: {len(flagged)} of {len(cmp)} rows marked")
+        regressed = regressions(cmp)
     click.echo(f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}")
-    if any_failed(df):
+    if any_failed(df) or regressed:
         sys.exit(1)
 
 

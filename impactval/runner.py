@@ -24,12 +24,12 @@ from impactval.engines.base import EngineSettings, run_isolated
 from impactval.errors import EngineError, ImpactvalError
 from impactval.reference.result import ImpactResult
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 #: statuses that make `impactval run` exit with 1 ("not-installed" and "skipped" only inform)
 FAILED_STATUSES = ("crashed", "timeout", "unstable", "no-contact")
 #: results.csv columns, in order
 COLUMNS = (
-    "schema_version", "run_id", "scene", "engine", "version", "model", "contact", "integrator", "dt",
+    "schema_version", "run_id", "scene", "scene_hash", "engine", "version", "model", "contact", "integrator", "dt",
     "segments", "status", "message",
     "t_m", "f_m", "delta_m", "ref_t_m", "ref_f_m", "ref_delta_m",
     "err_t_m", "err_f_m", "err_delta_m", "err_curve",
@@ -119,6 +119,17 @@ def _num(x: Any) -> float:
         return math.nan
 
 
+def scene_hash(scene) -> str:
+    """Identity of what a row measured: the canonical scene (ball, target, materials) and the
+    reference version; rows with different hashes are never compared (impactval.history)."""
+    import hashlib
+
+    import impactval
+
+    canon = repr((scene.ball, scene.target, impactval.__version__))
+    return hashlib.sha1(canon.encode()).hexdigest()[:12]
+
+
 def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
              lin: ImpactResult | None) -> dict[str, Any]:
     """One results row (see COLUMNS)."""
@@ -127,7 +138,8 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     row: dict[str, Any] = dict.fromkeys(COLUMNS, math.nan)
     rs = res.settings or {}
     row.update(
-        schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, engine=res.source or spec,
+        schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, scene_hash=scene_hash(scene),
+        engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
         integrator=rs.get("integrator") or settings.integrator or "", dt=settings.dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body
@@ -198,7 +210,8 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
         dt: float | None = None, contact: str | None = None, integrator: str | None = None,
         segments: int | None = None, timeout_s: float | None = None, tol: float = 1e-6,
-        out: str | Path | None = None, on_row: Callable[[dict[str, Any]], None] | None = None) -> pd.DataFrame:
+        out: str | Path | None = None, on_row: Callable[[dict[str, Any]], None] | None = None,
+        baseline: str | Path | None = None, threshold: float = 0.2) -> pd.DataFrame:
     """Run the reference and every engine on every scene; one row per (scene, engine).
 
     Parameters
@@ -214,6 +227,11 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         Append each row to `out/results.csv` as soon as it exists; write `out/report.md` at the end.
     on_row : callable, optional
         Called with each row dict as soon as it exists (e.g. to print progress).
+    baseline : path, optional
+        results.csv of an earlier run: the report gets a section with marks (see
+        `impactval.history`) and the DataFrame's `attrs["baseline"]` holds the comparison.
+    threshold : float
+        Relative change of a row's score that counts as worse or better (0.2 = 20 %).
 
     Returns a DataFrame with the columns of `COLUMNS`; errors are signed relative differences
     (engine - reference) / reference; `err_curve` is the whole-curve error (see
@@ -231,6 +249,11 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     settings = replace(base, **over)
     _check_settings_somewhere(specs, settings)
     per_engine = {spec: settings_for(settings, spec) for spec in specs}
+    old = None
+    if baseline is not None:      # read before this run appends to what may be the same file
+        from impactval.history import load_results
+
+        old = load_results(baseline, SCHEMA_VERSION)
     scene_objs = [_as_scene(s) for s in scenes]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")
@@ -259,8 +282,15 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                 on_row(row)
             rows.append(row)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
+    report = markdown_report(df, settings)
+    if old is not None:
+        from impactval import history
+
+        cmp = history.compare(df, old, threshold)
+        df.attrs["baseline"] = cmp
+        report += history.markdown(cmp, baseline, threshold)
     if out is not None:
-        (Path(out) / "report.md").write_text(markdown_report(df, settings))
+        (Path(out) / "report.md").write_text(report)
     return df
 
 
