@@ -224,6 +224,17 @@ def _parse_options(items: tuple[str, ...]) -> tuple[tuple[str, object], ...]:
     return tuple(out)
 
 
+def _parse_dts(text: str) -> list[float]:
+    """--dt: one time step or a comma-separated list [s]."""
+    try:
+        dts = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise ImpactvalError(f"--dt takes time steps in s, comma-separated (e.g. 1e-6,5e-7), got {text!r}.") from None
+    if not dts:
+        raise ImpactvalError("--dt: give at least one time step in s.")
+    return dts
+
+
 def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, options=()):
     from impactval.engines.base import EngineSettings
 
@@ -235,7 +246,8 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.argument("scene", nargs=-1)
 @click.option("--engines", "engines", default="mujoco", show_default=True,
               help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
-@click.option("--dt", default=1e-6, show_default=True, type=float, help="Engine time step [s].")
+@click.option("--dt", default="1e-6", show_default=True,
+              help="Engine time step [s]; several, comma-separated (1e-6,5e-7,2e-7), sweep speed against accuracy.")
 @click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]),
               help="hertz: exact law injected; native: engine contact as the linear spring k0; "
                    "native-hertz: engine contact shaped toward Hertz.")
@@ -266,14 +278,16 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     from impactval.scenarios.scene import catalogue_names
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
-    settings = _run_settings(dt, contact, integrator, segments, timeout, tail, modes, options)
+    dts = _parse_dts(dt)
+    settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or catalogue_names()
     _warn_if_compiling()
 
     def progress(row):
         click.echo(f"  {row['scene']} / {row['engine']}: {row['status']}", err=True)
 
-    df = run(names, specs, settings, tol=tol, out=out, on_row=progress, baseline=baseline, threshold=threshold)
+    df = run(names, specs, settings, dt=dts if len(dts) > 1 else None, tol=tol, out=out, on_row=progress,
+             baseline=baseline, threshold=threshold)
     click.echo(text_table(df))
     regressed = False
     if "baseline" in df.attrs:

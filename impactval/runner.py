@@ -208,7 +208,7 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
 
 
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
-        dt: float | None = None, contact: str | None = None, integrator: str | None = None,
+        dt: float | list[float] | None = None, contact: str | None = None, integrator: str | None = None,
         segments: int | None = None, timeout_s: float | None = None, tol: float = 1e-6,
         out: str | Path | None = None, on_row: Callable[[dict[str, Any]], None] | None = None,
         baseline: str | Path | None = None, threshold: float = 0.2) -> pd.DataFrame:
@@ -221,6 +221,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         comma-separated string)
     settings : EngineSettings, optional
         Base settings; `dt` [s], `contact`, `integrator`, `segments`, `timeout_s` [s] override it.
+        `dt` may be a list: every job then runs once per time step (a speed/accuracy sweep), and the
+        report gets a table and a plot of wall time against error.
     tol : float
         Relative tolerance of the reference solutions (Hertz and, for native contact, linear).
     out : directory, optional
@@ -244,11 +246,16 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     if not specs:
         raise EngineError("no engine given; known: " + ", ".join(ENGINES) + ".")
     base = settings or EngineSettings()
-    over = {k: v for k, v in dict(dt=dt, contact=contact, integrator=integrator, segments=segments,
+    # several time steps = a speed/accuracy sweep: every job runs once per dt
+    dts = [float(x) for x in dt] if isinstance(dt, (list, tuple)) else [dt] if dt is not None else [base.dt]
+    if not dts:
+        raise EngineError("dt: give at least one time step.")
+    over = {k: v for k, v in dict(contact=contact, integrator=integrator, segments=segments,
                                   timeout_s=timeout_s).items() if v is not None}
-    settings = replace(base, **over)
+    variants = [replace(base, dt=step, **over) for step in dts]
+    settings = variants[0]
     _check_settings_somewhere(specs, settings)
-    per_engine = {spec: settings_for(settings, spec) for spec in specs}
+    per_engine = {(spec, v.dt): settings_for(v, spec) for spec in specs for v in variants}
     old = None
     if baseline is not None:      # read before this run appends to what may be the same file
         from impactval.history import load_results
@@ -265,8 +272,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     for scene in scene_objs:
         ref = impactval.solve(scene, tol=tol)
         lin_cache: dict[float, ImpactResult | None] = {}
-        for spec in specs:
-            eng = per_engine[spec]
+        for spec, step in ((sp, v.dt) for v in variants for sp in specs):
+            eng = per_engine[(spec, step)]
             res = _unavailable(spec, scene, eng) or run_isolated(spec, scene, eng)
             lin = None
             if settings.contact == "native" and res.success:
@@ -283,6 +290,14 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
             rows.append(row)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     report = markdown_report(df, settings)
+    if len(variants) > 1:
+        from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
+
+        report += speed_accuracy_table(df)
+        if out is not None:
+            png = speed_accuracy_plot(df, Path(out) / "speed_accuracy.png")
+            if png is not None:
+                report += f"\n![wall time vs error]({png.name})\n"
     if old is not None:
         from impactval import history
 
@@ -345,7 +360,9 @@ def markdown_report(df: pd.DataFrame, settings: EngineSettings | None = None) ->
     header, cells = table_rows(df)
     out = ["# impactval run", ""]
     if settings is not None:
-        out += [f"Settings: dt = {settings.dt:g} s, contact = {settings.contact}, integrator = "
+        steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
+                                                     reverse=True)) or f"{settings.dt:g}"
+        out += [f"Settings: dt = {steps} s, contact = {settings.contact}, integrator = "
                 f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
                 f"timeout = {settings.timeout_s:g} s.", ""]
     out += ["Errors are signed relative differences (engine - reference) / reference in %; `curve` is the RMS of "

@@ -134,3 +134,24 @@ def test_cli_option_syntax_error_is_one_line(tmp_path):
     out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco",
                           "--option", "nonsense", "--out", str(tmp_path)], capture_output=True, text=True)
     assert out.returncode == 2 and "--option takes KEY=VALUE" in out.stderr and "Traceback" not in out.stderr
+
+
+@requires_mujoco
+def test_dt_sweep_rows_table_and_plot(tmp_path):
+    """Several time steps: one row per dt, a speed/accuracy table and a plot; errors fall with dt."""
+    from impactval.runner import run
+    df = run(["plate_steel"], ["mujoco"], dt=[1e-6, 2.5e-7], tol=1e-7, out=tmp_path)
+    assert sorted(df["dt"]) == [2.5e-7, 1e-6] and (df["status"] == "ok").all()
+    err = df.set_index("dt")["err_f_m"].abs()
+    assert err[2.5e-7] < err[1e-6] / 4                  # first-order-or-better in dt on the plate
+    report = (tmp_path / "report.md").read_text()
+    assert "## Speed against accuracy" in report and "speed_accuracy.png" in report
+    assert (tmp_path / "speed_accuracy.png").stat().st_size > 1000
+
+
+def test_cli_bad_dt_list_is_one_line(tmp_path):
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--dt", "1e-6,abc",
+                          "--out", str(tmp_path)], capture_output=True, text=True)
+    assert out.returncode == 2 and "--dt takes time steps" in out.stderr and "Traceback" not in out.stderr
