@@ -28,8 +28,8 @@ def _warn_if_compiling() -> None:
     from impactval.reference import kernel
 
     try:
-        path = Path(kernel.solve_pair._cache._cache_path)
-        cached = any(path.glob("kernel.solve_pair-*.nbi"))
+        path = Path(kernel.solve_auto._cache._cache_path)
+        cached = any(path.glob("kernel.solve_auto-*.nbi"))
     except Exception:  # noqa: BLE001 - only a hint
         cached = True
     if not cached:

@@ -62,7 +62,7 @@ def test_first_run_says_it_compiles(tmp_path):
     import os
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     code = ("import impactval.cli as c; from impactval.reference import kernel; from pathlib import Path; "
-            "print(any(Path(kernel.solve_pair._cache._cache_path).glob('kernel.solve_pair-*.nbi')))")
+            "print(any(Path(kernel.solve_auto._cache._cache_path).glob('kernel.solve_auto-*.nbi')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert out.stdout.strip() == "False"
     warn = subprocess.run([sys.executable, "-c", "import impactval.cli as c; c._warn_if_compiling()"],
