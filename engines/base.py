@@ -21,7 +21,7 @@ import multiprocessing as mp
 import signal
 import time
 import traceback
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -95,10 +95,6 @@ class Simulation:
     model: str = ""
     diagnostics: dict[str, Any] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
-
-
-class EngineUnavailable(Exception):
-    """The engine's Python package is not installed."""
 
 
 class EngineDiverged(Exception):
@@ -334,9 +330,5 @@ def run_isolated(spec: str, scene, settings: EngineSettings) -> ImpactResult:
                                settings=settings.as_dict())
 
 
-def replace_settings(settings: EngineSettings, **kw: Any) -> EngineSettings:
-    return replace(settings, **kw)
-
-
-__all__ = ["EngineAdapter", "EngineSettings", "Simulation", "EngineDiverged", "EngineUnavailable",
+__all__ = ["EngineAdapter", "EngineSettings", "Simulation", "EngineDiverged",
            "contacts_from_series", "run_isolated", "load_adapter", "CONTACT_MODES"]

@@ -30,7 +30,6 @@ from numba import njit
 
 STATUS_OK = 0
 STATUS_OUT_OF_NODES = 1
-STATUS_NO_CONTACT = 2
 
 
 @njit(cache=True)
@@ -567,6 +566,16 @@ def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, tar
 
 
 @njit(cache=True)
+def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
+    """Step-size levels J: the smallest step H/2^J is ~(smallest_factor tol)^0.4 t_plate. The first
+    step's force is only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not
+    to matter."""
+    smallest = (smallest_factor * tol) ** 0.4
+    J = int(np.ceil(np.log2(1.0 / (smallest * n_steps))))
+    return min(max(J, 3), 30)
+
+
+@njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
                est_order, phase, coeff, smallest_factor):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
@@ -586,9 +595,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     scale = 1.0 / (2.0**est_order - 1.0)
     for _ in range(12):
         H = t_plate / n
-        smallest = (smallest_factor * tol) ** 0.4     # smallest step / t_plate (see solve.levels)
-        J = int(np.ceil(np.log2(1.0 / (smallest * n))))
-        J = min(max(J, 3), 30)
+        J = levels(n, tol, smallest_factor)
         max_nodes = int(6 * n + 60 * J + 50)
         if window > 0.0:
             max_nodes += int(2.5 * window / H)

@@ -120,12 +120,16 @@ def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float
     else:  # pragma: no cover - would need a pathological scene
         raise ImpactvalError(f"reference solver did not finish the contact within {max_nodes} steps")
     t, d, f, x, u, e, flags = t[:cnt], d[:cnt], f[:cnt], x[:cnt], u[:cnt], e[:cnt], flags[:cnt]
-    table = kernel.contacts(t, d, flags)
-    contacts = tuple(Contact(float(a), float(b), alpha * float(c) ** 1.5, float(c)) for a, b, c in table)
+    return _make_run(alpha, t, d, f, x, u, e, kernel.contacts(t, d, flags), int(np.argmax(flags == 2)),
+                     float(np.max(np.abs(e / e[0] - 1.0))))
+
+
+def _make_run(alpha, t, d, f, x, u, e, table, end: int, drift: float) -> Run:
+    """A Run from the kernel's series and contact table (rows t_start, t_end, delta_max)."""
+    contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in np.asarray(table).tolist())
     first = contacts[0]
-    end = int(np.argmax(flags == 2))
-    return Run(Metrics(first.t_end - first.t_start, first.f_max, first.delta_max), cnt - 1,
-               t, d, f, x, u, e, contacts, -float(u[end]), float(np.max(np.abs(e / e[0] - 1.0))))
+    return Run(Metrics(first.t_end - first.t_start, first.f_max, first.delta_max), len(t) - 1,
+               t, d, f, x, u, e, contacts, -float(u[end]), drift)
 
 
 #: the smallest step H/2^J is ~(SMALLEST_STEP_FACTOR tol)^0.4 t_plate
@@ -133,10 +137,8 @@ SMALLEST_STEP_FACTOR = 1e-3
 
 
 def levels(n_steps: float, tol: float) -> int:
-    """Step-size levels J: the smallest step H/2^J is ~(1e-3 tol)^0.4 t_plate. The first step's force
-    is only approximated (error ~ (step / t_plate)^2.5), so it is made small enough not to matter."""
-    smallest = (SMALLEST_STEP_FACTOR * tol) ** 0.4
-    return int(min(max(math.ceil(math.log2(1.0 / (smallest * n_steps))), 3), 30))
+    """Step-size levels J for a base step t_plate / n_steps (see kernel.levels)."""
+    return kernel.levels(float(n_steps), float(tol), SMALLEST_STEP_FACTOR)
 
 
 #: a mode is resolved by the base step H when omega H <= RESOLVED_PHASE
@@ -169,11 +171,9 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
         P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, RESOLVED_PHASE, UNRESOLVED_COEFF, SMALLEST_STEP_FACTOR)
     if st != kernel.STATUS_OK:  # pragma: no cover - would need a pathological scene
         raise ImpactvalError("reference solver did not finish the contact")
-    contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in fine.tolist())
-    first = contacts[0]
-    m = Metrics(first.t_end - first.t_start, first.f_max, first.delta_max)
-    return (Run(m, cnt - 1, t, d, f, x, u, e, contacts, -float(u[end]), drift),
-            Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m))
+    run = _make_run(alpha, t, d, f, x, u, e, fine, end, drift)
+    m = run.metrics
+    return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
 
 
 def _check_tol(tol: float) -> float:

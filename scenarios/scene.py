@@ -128,13 +128,17 @@ class Scene:
     @cached_property
     def e_star(self) -> float:
         """Contact modulus E* [Pa]: 1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2."""
+        from impactval.reference.hertz import e_star      # the formulas live in one place
+
         m1, m2 = self.ball.material, self.target.material
-        return 1.0 / ((1 - m1.poisson**2) / m1.young + (1 - m2.poisson**2) / m2.young)
+        return e_star(m1.young, m1.poisson, m2.young, m2.poisson)
 
     @cached_property
     def alpha(self) -> float:
         """Hertz coefficient alpha [N/m^1.5], ball on a flat face (paper eq. 20)."""
-        return 4.0 / 3.0 * self.e_star * math.sqrt(self.ball.radius)
+        from impactval.reference.hertz import hertz_alpha
+
+        return hertz_alpha(self.ball.radius, self.e_star)
 
 
 # ----------------------------------------------------------------------------- validation helpers

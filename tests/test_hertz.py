@@ -46,3 +46,10 @@ def test_curve_is_exact_against_the_energy_integral():
 
 def test_alpha_formula():
     assert hertz_alpha(0.01, 1e11) == pytest.approx(4 / 3 * 1e11 * 0.1)
+
+
+def test_ball_on_ball_tends_to_ball_on_plane():
+    from impactval.reference.hertz import hertz_alpha_spheres
+    assert hertz_alpha_spheres(0.01, 1e9, 1e11) == pytest.approx(hertz_alpha(0.01, 1e11), rel=1e-10)
+    # two equal balls: effective radius R/2
+    assert hertz_alpha_spheres(0.01, 0.01, 1e11) == pytest.approx(hertz_alpha(0.005, 1e11), rel=1e-14)
