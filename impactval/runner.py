@@ -256,6 +256,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     settings = variants[0]
     _check_settings_somewhere(specs, settings)
     per_engine = {(spec, v.dt): settings_for(v, spec) for spec in specs for v in variants}
+    if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
+        raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {threshold!r}.")
     old = None
     if baseline is not None:      # read before this run appends to what may be the same file
         from impactval.history import load_results

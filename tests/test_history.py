@@ -76,3 +76,10 @@ def test_nightly_run_flags_a_regression_and_exits_1(tmp_path):
     assert "+ plate_steel / mujoco" in worse.stdout
     report = (tmp_path / "c" / "report.md").read_text()
     assert "## Against the baseline" in report and "| + | plate_steel | mujoco |" in report
+
+
+def test_bad_threshold_fails_before_any_job(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--threshold", "-1",
+                          "--out", str(tmp_path)], capture_output=True, text=True)
+    assert out.returncode == 2 and "threshold must be a positive fraction" in out.stderr
+    assert not (tmp_path / "results.csv").exists()
