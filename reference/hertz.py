@@ -34,6 +34,54 @@ def hertz_alpha_spheres(radius1: float, radius2: float, e_star_pa: float) -> flo
 
 
 @dataclass(frozen=True)
+class ContactLaw:
+    """A normal contact law f = coefficient * delta**exponent for delta > 0 (0 otherwise).
+
+    `kind` "hertz" (exponent 1.5, coefficient alpha [N/m**1.5]) or "linear" (exponent 1,
+    coefficient k [N/m]). Every adapter takes its force, potential and tangent stiffness from here,
+    and carries the law in its result so the comparison knows which theory applies.
+    """
+
+    kind: str
+    coefficient: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("hertz", "linear"):
+            raise ValueError(f"contact law kind must be 'hertz' or 'linear', got {self.kind!r}")
+        if not (math.isfinite(self.coefficient) and self.coefficient > 0):
+            raise ValueError(f"contact law coefficient must be a positive finite number, got {self.coefficient!r}")
+
+    @classmethod
+    def hertz(cls, alpha: float) -> "ContactLaw":
+        return cls("hertz", float(alpha))
+
+    @classmethod
+    def linear(cls, stiffness: float) -> "ContactLaw":
+        return cls("linear", float(stiffness))
+
+    @property
+    def exponent(self) -> float:
+        return 1.5 if self.kind == "hertz" else 1.0
+
+    def force(self, delta: float) -> float:
+        """Contact force [N] at approach delta [m] (0 for delta <= 0)."""
+        return self.coefficient * delta**self.exponent if delta > 0 else 0.0
+
+    def potential(self, delta: float) -> float:
+        """Stored energy [J] at approach delta [m]: coefficient delta^(p+1) / (p+1)."""
+        p = self.exponent
+        return self.coefficient * delta ** (p + 1) / (p + 1) if delta > 0 else 0.0
+
+    def stiffness(self, delta: float) -> float:
+        """Tangent stiffness df/ddelta [N/m] at approach delta [m] (0 for delta <= 0)."""
+        p = self.exponent
+        return p * self.coefficient * delta ** (p - 1) if delta > 0 else 0.0
+
+    def as_dict(self) -> dict[str, float | str]:
+        return {"kind": self.kind, "coefficient": self.coefficient, "exponent": self.exponent}
+
+
+@dataclass(frozen=True)
 class PlateImpact:
     """Ball on a rigid plate, closed form: `delta_m` [m], `f_m` [N], `t_m` [s], `k_m` [N/m],
     `omega_m` = pi/t_m [rad/s], and the linear-theory spring `k0` [N/m] (eq. 47-49)."""

@@ -1,14 +1,39 @@
 """The result shape shared by the reference solver and every engine adapter (style.md, pattern 4)."""
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-#: statuses every producer of an ImpactResult may report
-STATUSES = ("ok", "no-contact", "unstable", "crashed", "timeout", "not-installed", "skipped")
+
+class Status(str, enum.Enum):
+    """How a job ended. A `str` enum: `Status.OK == "ok"`, so rows and CSV cells stay plain text."""
+
+    OK = "ok"                        # metrics measured
+    NO_CONTACT = "no-contact"        # the ball never touched the target (or tunnelled through it)
+    UNSTABLE = "unstable"            # NaN/inf, energy growth, ball through the target, dt above the limit
+    CRASHED = "crashed"              # the engine raised or its process died
+    TIMEOUT = "timeout"              # no result within the job's timeout
+    NOT_INSTALLED = "not-installed"  # the engine's package is missing (message: install command)
+    SKIPPED = "skipped"              # the engine does not support this scene/setting combination
+    INTERRUPTED = "interrupted"      # the run was stopped (Ctrl-C, SIGTERM) before this job finished
+
+    def __str__(self) -> str:        # f"{status}" -> "ok", not "Status.OK"
+        return self.value
+
+    @property
+    def failed(self) -> bool:
+        """True for the statuses that make a run exit 1 (a job that should have worked did not)."""
+        return self in FAILED
+
+
+#: statuses every producer of an ImpactResult may report (plain strings, for messages and CSV)
+STATUSES = tuple(s.value for s in Status)
+#: statuses that count as a failed job (exit 1); not-installed, skipped and interrupted only inform
+FAILED = frozenset({Status.NO_CONTACT, Status.UNSTABLE, Status.CRASHED, Status.TIMEOUT})
 
 
 @dataclass(frozen=True)
@@ -68,7 +93,7 @@ class ImpactResult:
     rebound_velocity: float = math.nan
     energy_error: float = math.nan
     contacts: tuple[Contact, ...] = ()
-    status: str = "ok"
+    status: Status = Status.OK
     message: str = ""
     version: str = ""
     settings: dict[str, Any] = field(default_factory=dict)
@@ -76,10 +101,18 @@ class ImpactResult:
     wall_time_build_s: float = 0.0
     wall_time_step_s: float = 0.0
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    dt: float = math.nan
+    dt_limit: float = math.nan
+    model_error: float = math.nan
+    contact_law: Any = None
+    validity: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", Status(self.status))   # accepts "ok" as well as Status.OK
 
     @property
     def success(self) -> bool:
-        return self.status == "ok"
+        return self.status == Status.OK
 
     @property
     def metrics(self) -> Metrics:
@@ -92,7 +125,7 @@ class ImpactResult:
     @classmethod
     def failed(cls, scene: str, source: str, status: str, message: str, **kw: Any) -> "ImpactResult":
         """A result with no numbers: `status` says why (see STATUSES)."""
-        if status not in STATUSES:
+        if str(status) not in STATUSES:
             raise ValueError(f"unknown status {status!r}; known: {', '.join(STATUSES)}")
         return cls(scene, source, kw.pop("model", ""), math.nan, math.nan, math.nan, status=status,
                    message=message, **kw)
@@ -100,7 +133,7 @@ class ImpactResult:
     def summary(self) -> dict[str, Any]:
         """Flat dict of the scalar fields (for tables and JSON)."""
         out: dict[str, Any] = {"scene": self.scene, "source": self.source, "model": self.model,
-                               "status": self.status, "t_m": self.t_m, "f_m": self.f_m, "delta_m": self.delta_m}
+                               "status": str(self.status), "t_m": self.t_m, "f_m": self.f_m, "delta_m": self.delta_m}
         if self.uncertainty is not None:
             out.update({f"u_{k}": v for k, v in self.uncertainty.as_dict().items()})
         out.update({"modes": self.modes, "rebound_velocity": self.rebound_velocity,

@@ -53,3 +53,25 @@ def test_ball_on_ball_tends_to_ball_on_plane():
     assert hertz_alpha_spheres(0.01, 1e9, 1e11) == pytest.approx(hertz_alpha(0.01, 1e11), rel=1e-10)
     # two equal balls: effective radius R/2
     assert hertz_alpha_spheres(0.01, 0.01, 1e11) == pytest.approx(hertz_alpha(0.005, 1e11), rel=1e-14)
+
+
+def test_contact_law_force_potential_stiffness_are_consistent():
+    """ContactLaw: potential' = force and force' = stiffness (central differences), both laws."""
+    from impactval.reference.hertz import ContactLaw
+
+    for law in (ContactLaw.hertz(3.7e9), ContactLaw.linear(2.1e7)):
+        for d in (1e-7, 3e-6, 2e-5):
+            h = d * 1e-5
+            assert abs((law.potential(d + h) - law.potential(d - h)) / (2 * h) / law.force(d) - 1) < 1e-8
+            assert abs((law.force(d + h) - law.force(d - h)) / (2 * h) / law.stiffness(d) - 1) < 1e-8
+        assert law.force(-1e-6) == 0.0 and law.potential(0.0) == 0.0
+    with pytest.raises(ValueError):
+        ContactLaw("cubic", 1.0)
+
+
+def test_status_is_a_string_enum():
+    from impactval.reference.result import ImpactResult, Status
+
+    r = ImpactResult.failed("s", "e", "timeout", "slow")
+    assert r.status is Status.TIMEOUT and r.status == "timeout" and f"{r.status}" == "timeout"
+    assert Status.UNSTABLE.failed and not Status.SKIPPED.failed
