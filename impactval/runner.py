@@ -42,10 +42,16 @@ COLUMNS = (
 
 
 def resolve_engine(spec: str) -> str:
-    """Check an engine name ("mujoco") or import path ("pkg.module:Class"); return it unchanged."""
+    """Check an engine name ("mujoco"), entry point (group impactval.engines) or import path
+    ("pkg.module:Class", which must name an EngineAdapter subclass); return it unchanged."""
     if not isinstance(spec, str) or not spec.strip():
         raise EngineError(f"engine names must be non-empty strings, got {spec!r}.")
-    if spec in ENGINES or (":" in spec and all(spec.split(":", 1))):
+    if spec in ENGINES:
+        return spec
+    from impactval.engines.base import _entry_points, adapter_class
+
+    if ":" in spec or spec in _entry_points():
+        adapter_class(spec)          # EngineError (exit 2) when it is not an adapter class
         return spec
     installed = [n for n, m in ENGINE_MODULES.items() if importlib.util.find_spec(m)]
     raise EngineError(f"unknown engine {spec!r}; known: {', '.join(ENGINES)} (installed: "
@@ -141,7 +147,8 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, scene_hash=scene_hash(scene),
         engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
-        integrator=rs.get("integrator") or settings.integrator or "", dt=settings.dt,
+        integrator=rs.get("integrator") or settings.integrator or "",
+        dt=res.dt if math.isfinite(_num(res.dt)) else settings.dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body
         segments=next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
                        if v not in (None, "", 0)), ""),
@@ -149,7 +156,8 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
         err_curve=curve_error(res, ref) if res.success else math.nan,
-        contact_stiffness=_num(diag.get("contact_stiffness")),
+        contact_stiffness=(res.contact_law.coefficient if getattr(res.contact_law, "kind", "") == "linear"
+                           else _num(diag.get("contact_stiffness"))),
         rebound_velocity=res.rebound_velocity, energy_error=res.energy_error, n_contacts=len(res.contacts),
         n_steps=res.n_steps, wall_time_build_s=res.wall_time_build_s, wall_time_step_s=res.wall_time_step_s,
         wall_time_s=res.wall_time_s,
@@ -194,17 +202,11 @@ def _as_scene(s):
 
 
 def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
-    """The settings one engine gets: options named "ENGINE.key" go to that engine only (as "key"),
-    plain "key" options to every engine."""
-    name = spec.split(":")[-1].lower() if ":" in spec else spec
-    opts = []
-    for key, value in settings.options:
-        head, dot, rest = key.partition(".")
-        if not dot:
-            opts.append((key, value))
-        elif head.lower() in (name, spec):
-            opts.append((rest, value))
-    return replace(settings, options=tuple(opts))
+    """The settings one engine gets (engines.options.options_for): "ENGINE.key" options go to that
+    engine only (as "key"), plain "key" options to every engine."""
+    from impactval.engines.options import options_for
+
+    return options_for(settings, spec)
 
 
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
@@ -254,6 +256,9 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                                   timeout_s=timeout_s).items() if v is not None}
     variants = [replace(base, dt=step, **over) for step in dts]
     settings = variants[0]
+    from impactval.engines.options import check_prefixes
+
+    check_prefixes(settings.options, specs)       # "bullet.x": no such engine in this run -> exit 2
     _check_settings_somewhere(specs, settings)
     per_engine = {(spec, v.dt): settings_for(v, spec) for spec in specs for v in variants}
     if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
@@ -278,8 +283,9 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
             eng = per_engine[(spec, step)]
             res = _unavailable(spec, scene, eng) or run_isolated(spec, scene, eng)
             lin = None
-            if settings.contact == "native" and res.success:
-                k = _num((res.diagnostics or {}).get("contact_stiffness"))
+            law = getattr(res, "contact_law", None)
+            if res.success and law is not None and law.kind == "linear":
+                k = law.coefficient           # every linear row gets its linear-theory comparison
                 if math.isfinite(k) and k > 0:
                     if k not in lin_cache:
                         lin_cache[k] = _linear_reference(scene, tol, k)
@@ -338,7 +344,8 @@ def table_rows(df: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
     cells = []
     for _, r in df.iterrows():
         seg = r["segments"]
-        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), f"{r['dt']:g}",
+        dt = f"{r['dt']:g}" if isinstance(r["dt"], (int, float)) else str(r["dt"])
+        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), dt,
                       "" if seg in ("", None) or (isinstance(seg, float) and math.isnan(seg)) else str(seg),
                       str(r["status"]), _pct(r["err_t_m"]), _pct(r["err_f_m"]), _pct(r["err_delta_m"]),
                       _pct_abs(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
@@ -363,7 +370,7 @@ def markdown_report(df: pd.DataFrame, settings: EngineSettings | None = None) ->
     out = ["# impactval run", ""]
     if settings is not None:
         steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
-                                                     reverse=True)) or f"{settings.dt:g}"
+                                                     reverse=True)) or f"{settings.dt}"
         out += [f"Settings: dt = {steps} s, contact = {settings.contact}, integrator = "
                 f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
                 f"timeout = {settings.timeout_s:g} s.", ""]
