@@ -44,8 +44,9 @@ Contact modes:
 Stability: Euler and implicitfast treat the hinge springs and the contact explicitly (semi-implicit
 Euler, stable while omega_max dt < 2), RK4 while omega_max dt < 2.83; omega_max is that of chain + ball
 + contact spring at its tangent stiffness at the rigid-plate f_m (`engines.chain.omega_max`).
-Energy for Euler/implicitfast uses the mean of the half-step velocities around a sample (second
-order), so `energy(model)` reports the sample before the last step. The support constraints use
+After `mj_step` the positions-derived data describe the state at the start of the step, so the adapter
+samples that state (`sample_lag = 1`, no extra `mj_forward`); energy for Euler/implicitfast uses the mean
+of the velocities before and after the step (second order). The support constraints use
 solref = (2 dt, 1) (MuJoCo's default 0.02 s makes them springs).
 """
 from __future__ import annotations
@@ -311,6 +312,7 @@ class MujocoAdapter(SteppingAdapter):
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
     Options = MujocoOptions
+    sample_lag = 1          # after mj_step, positions-derived data describe the step's start (see step)
 
     def check_settings(self, settings: EngineSettings) -> EngineSettings:
         settings = super().check_settings(settings)
@@ -407,7 +409,8 @@ class MujocoAdapter(SteppingAdapter):
         integ = settings.integrator or INTEGRATORS[0]
         run = _Run(mj=mujoco, model=model, data=data, lay=lay, probe=probe, contact_mode=settings.contact,
                    alpha=alpha, potential=potential, sync=integ in ("Euler", "implicitfast"),
-                   v_prev=np.zeros(model.nv), mv=np.zeros(model.nv), e_prev=math.nan, n_steps=0, dt=settings.dt,
+                   v_prev=np.zeros(model.nv), v_mean=np.zeros(model.nv), mv=np.zeros(model.nv), n_steps=0,
+                   dt=settings.dt,
                    x_ball0=float(data.qpos[probe.ball_qpos]), diagnostics=info, integrator=integ, chain=chain,
                    warnings=[], old_cb=mujoco.get_mjcb_passive(), old_warn=mujoco.get_mju_user_warning())
         # MuJoCo would print warnings and append them to ./MUJOCO_LOG.TXT; they become the status instead
@@ -415,7 +418,13 @@ class MujocoAdapter(SteppingAdapter):
         if settings.contact == "hertz":
             mujoco.set_mjcb_passive(probe.hertz_callback())
         mujoco.mj_forward(model, data)
-        run.e_prev = self._energy_now(run)
+        run.z_tip0 = float(data.site_xpos[probe.tip, 2])
+        delta, xs = probe.delta_points(data)
+        f0 = alpha * delta**1.5 if (settings.contact == "hertz" and delta > 0) else 0.0
+        e0 = float(data.energy[0]) + float(data.energy[1]) + (potential(delta) if delta > 0 else 0.0)
+        run.sample = (delta, f0, 0.0, xs, scene.ball.velocity, e0)
+        if chain is not None:
+            info["segments"] = chain.n
         return run
 
     def close(self, run: _Run) -> None:
@@ -428,6 +437,9 @@ class MujocoAdapter(SteppingAdapter):
 
     # ------------------------------------------------------------------ stepping
     def step(self, run: _Run) -> None:
+        """One mj_step. mj_step computes the forward dynamics of the state at its start, then integrates:
+        after it, positions-derived data (site_xpos, energy, contact forces, qM) describe the state at the
+        start of the step, so the adapter samples that state (sample_lag = 1) and needs no extra mj_forward."""
         mj, m, d = run.mj, run.model, run.data
         run.v_prev[:] = d.qvel
         mj.mj_step(m, d)
@@ -436,43 +448,39 @@ class MujocoAdapter(SteppingAdapter):
             raise EngineDiverged(f"MuJoCo reported NaN/huge accelerations after {run.n_steps} steps "
                                  f"(t = {run.n_steps * run.dt:.3g} s, dt = {run.dt:g} s): "
                                  f"{run.warnings[0].strip() if run.warnings else ''}")
+        if not run.sync:
+            # RK4 evaluates intermediate stages inside mj_step: the data describe no single state, so
+            # recompute the new state and sample it (sample_lag = 0 for RK4)
+            mj.mj_forward(m, d)
+            run.v_prev[:] = d.qvel
+        delta, xs = run.probe.delta_points(d)
+        pe = float(d.energy[0]) + (run.potential(delta) if delta > 0 else 0.0)
         if run.sync:
             # Euler and implicitfast update the velocity first and move with it: qvel is a half-step
-            # velocity and 1/2 v'Mv with it swings by O(omega dt). The sample before this step gets the
-            # mean of the velocities before and after it (second order), with its mass matrix (d.qM is
-            # still that of the sample before the step).
-            run.v_prev += d.qvel
-            run.v_prev *= 0.5
-            mj.mj_mulM(m, d, run.mv, run.v_prev)
-            run.e_prev = run.pe_prev + 0.5 * float(run.v_prev @ run.mv)
-        mj.mj_forward(m, d)
-        if not run.sync:
-            run.e_prev = self._energy_now(run)
+            # velocity and 1/2 v'Mv with it swings by O(omega dt). The sampled state (the step's start) gets
+            # the mean of the velocities before and after the step (second order), with its mass matrix.
+            run.v_mean[:] = run.v_prev
+            run.v_mean += d.qvel
+            run.v_mean *= 0.5
+            mj.mj_mulM(m, d, run.mv, run.v_mean)
+            ke = 0.5 * float(run.v_mean @ run.mv)
         else:
-            self._potential_now(run)
-
-    def _potential_now(self, run: _Run) -> float:
-        delta, _ = run.probe.delta_points(run.data)
-        run.pe_prev = float(run.data.energy[0]) + (run.potential(delta) if delta > 0 else 0.0)
-        return run.pe_prev
-
-    def _energy_now(self, run: _Run) -> float:
-        return self._potential_now(run) + float(run.data.energy[1])
+            ke = float(d.energy[1])             # RK4: the new state's own kinetic energy
+        if run.contact_mode == "hertz":
+            f = run.alpha * delta**1.5 if delta > 0 else 0.0
+        else:
+            f = run.probe.native_force(d)
+        z_tip = float(d.site_xpos[run.probe.tip, 2])
+        run.sample = (delta, f, run.z_tip0 - z_tip, xs, -float(run.v_prev[run.probe.ball_dof]), pe + ke)
 
     def contact(self, run: _Run) -> tuple[float, float]:
-        delta, _ = run.probe.delta_points(run.data)
-        if run.contact_mode == "hertz":
-            return delta, (run.alpha * delta**1.5 if delta > 0 else 0.0)
-        return delta, run.probe.native_force(run.data)
+        return run.sample[0], run.sample[1]
 
     def energy(self, run: _Run) -> float:
-        """Energy [J] of the sample before the last step (Euler/implicitfast, synchronised velocities) or now (RK4)."""
-        return run.e_prev
+        return run.sample[5]
 
     def kinematics(self, run: _Run) -> tuple[float, float, float]:
-        d, p = run.data, run.probe
-        _, xs = p.delta_points(d)
-        return run.x_ball0 - float(d.qpos[p.ball_qpos]), xs, -float(d.qvel[p.ball_dof])
+        return run.sample[2], run.sample[3], run.sample[4]
 
     def frequencies(self, run: _Run) -> np.ndarray:
         if run.lay.kind != "beam":
@@ -485,6 +493,7 @@ class MujocoAdapter(SteppingAdapter):
         return f"mujoco-{name}-{run.contact_mode}"
 
     def simulate(self, scene, settings: EngineSettings):
+        self.sample_lag = 0 if (settings.integrator or INTEGRATORS[0]) == "RK4" else 1
         sim = super().simulate(scene, settings)
         k_lin = sim.diagnostics.get("contact_stiffness")
         if settings.contact == "native" and k_lin:
