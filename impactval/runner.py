@@ -398,13 +398,13 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         signum = getattr(stop, "signum", signal.SIGINT)
         status = RunStatus.INTERRUPTED
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            _shutdown(pool)
         ex.kill_workers()
         done_rows = [rows[k] for k in dict.fromkeys(keys) if k in rows]
         raise RunInterrupted(int(signum), done_rows, run_id, len(set(keys))) from None
     finally:
         if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
+            _shutdown(pool)
         if scheduler is None or client is not None:
             ex.kill_workers()
         if client is not None:
@@ -416,6 +416,14 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         if own_store and out is None and store is not None:
             db.close()
     return [rows[k] for k in keys]
+
+
+def _shutdown(pool) -> None:
+    """Stop an executor without waiting, dropping queued jobs (Dask's executor has no cancel_futures)."""
+    try:
+        pool.shutdown(wait=False, cancel_futures=True)
+    except TypeError:
+        pool.shutdown(wait=False)
 
 
 def _adapter_version(spec: str) -> str:
