@@ -515,8 +515,10 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         scene_objs += [s for s in tagged if s.name not in {x.name for x in scene_objs}]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")
-    if store is None and out is not None:
-        store = Path(out) / "impactval.sqlite"
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        if store is None:
+            store = Path(out) / "impactval.sqlite"
     db = store if isinstance(store, Store) else Store(store)
     jobs = build_jobs(scene_objs, specs, variants, tol)
     cmd = command if command is not None else "run(" + ", ".join(s.name for s in scene_objs) + "; " + \

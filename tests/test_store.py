@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 
 from conftest import requires_mujoco
+from pg_server import postgres_server, postgres_url  # noqa: F401 - fixtures
 from impactval.errors import ImpactvalError
 from impactval.store import EXPORT_COLUMNS, PERCENT_COLUMNS, Store, export, export_frame, frequencies_frame
 
@@ -91,3 +92,37 @@ def test_series_are_kept_on_request(tmp_path, plate_scene):
     assert set(s) == {"t", "f", "delta", "x_ball", "x_structure", "energy"}
     assert len(s["t"]) == df["n_steps"][0] + 1 or len(s["t"]) == df["n_steps"][0]
     assert s["f"].max() == pytest.approx(df["f_m"][0], rel=1e-2)    # sampled peak vs parabola-refined
+
+
+@requires_mujoco
+def test_postgresql_store_same_rows_as_sqlite_and_resume(postgres_url, tmp_path):
+    """--store postgresql://...: a real server; rows bit-identical to the SQLite store's, a rerun
+    reuses them, the export is the same, and two processes writing at once lose nothing."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from impactval.runner import run
+
+    kw = dict(dt=[1e-6, 5e-7], tol=1e-6)
+    lite = run(["plate_steel"], ["mujoco"], out=tmp_path / "lite", **kw)
+    pg = run(["plate_steel"], ["mujoco"], out=tmp_path / "pg", store=postgres_url, **kw)
+    again = run(["plate_steel"], ["mujoco"], out=tmp_path / "pg", store=postgres_url, **kw)
+    assert again.attrs["n_reused"] == 2 and list(again["run_id"]) == [pg.attrs["run_id"]] * 2
+    for col in ("err_t_m", "err_f_m", "err_delta_m", "err_curve", "t_m", "f_m", "delta_m", "ref_f_m", "job_key"):
+        assert list(lite[col]) == list(pg[col]) == list(again[col]), col
+    a, b = pd.read_csv(tmp_path / "lite" / "results.csv"), pd.read_csv(tmp_path / "pg" / "results.csv")
+    assert a["err_f_m_pct"].tolist() == b["err_f_m_pct"].tolist()
+    tests = str(Path(__file__).parent)
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--jobs", "1",
+           "--store", postgres_url, "--out", str(tmp_path / "both")]
+    procs = [subprocess.Popen(cmd + ["--dt", d], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env={**__import__("os").environ, "PYTHONPATH": tests})
+             for d in ("4e-7,3e-7,2e-7", "3e-7,2e-7,1.5e-7")]
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+    db = Store(postgres_url)
+    both = db.rows(out=tmp_path / "both")
+    assert len(both) == 4 and both["job_key"].is_unique and sorted(both["dt"]) == [1.5e-7, 2e-7, 3e-7, 4e-7]
+    db.close()
