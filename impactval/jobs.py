@@ -36,7 +36,9 @@ class Job:
 
     def label(self) -> str:
         """'plate_steel / mujoco dt=1e-06' for progress lines."""
-        return f"{self.scene.name} / {self.spec} dt={self.settings.dt:g}"
+        dt = self.settings.dt
+        return f"{self.scene.name} / {self.spec} dt={dt:g}" if isinstance(dt, (int, float)) else \
+            f"{self.scene.name} / {self.spec} dt={dt}"
 
 
 def _file_hash(paths) -> str:

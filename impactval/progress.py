@@ -62,9 +62,9 @@ class RichProgress(PlainProgress):
 
         self.console = Console(file=self.stream)
         self.running: dict[str, float] = {}
+        self.reused = 0
         self.live = Live(console=self.console, refresh_per_second=4, transient=True,
                          get_renderable=self._render)
-        self.reused = 0
 
     def start(self, total: int, reused: int) -> None:
         super().start(total, reused)
