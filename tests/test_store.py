@@ -126,3 +126,20 @@ def test_postgresql_store_same_rows_as_sqlite_and_resume(postgres_url, tmp_path)
     both = db.rows(out=tmp_path / "both")
     assert len(both) == 4 and both["job_key"].is_unique and sorted(both["dt"]) == [1.5e-7, 2e-7, 3e-7, 4e-7]
     db.close()
+
+
+def test_job_key_changes_with_what_decides_the_row_only(plate_scene):
+    from dataclasses import replace
+
+    import impactval
+    from impactval.engines.base import EngineSettings
+    from impactval.jobs import Job
+
+    base = Job(plate_scene, "mujoco", EngineSettings(dt=1e-6), 1e-6)
+    assert base.key == Job(impactval.load_scene("plate_steel"), "mujoco", EngineSettings(dt=1e-6), 1e-6).key
+    assert base.key == replace(base, settings=EngineSettings(dt=1e-6, timeout_s=5)).key     # timeout: no
+    others = [replace(base, settings=EngineSettings(dt=5e-7)), replace(base, tol=1e-7), replace(base, spec="pybullet"),
+              replace(base, settings=EngineSettings(dt=1e-6, options=(("x", 1),))),
+              replace(base, scene=impactval.load_scene("beam_ss_midspan"))]
+    keys = {base.key} | {j.key for j in others}
+    assert len(keys) == 1 + len(others) and all(len(k) == 32 for k in keys)
