@@ -386,6 +386,15 @@ def export(store: Store, out: str | Path) -> list[str]:
     notes (e.g. Parquet skipped) for the user."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    notes = []
+    old = out / "results.csv"
+    if old.is_file():           # a results.csv of an older impactval (not from a store): keep it, say where
+        with old.open(newline="") as fh:
+            header = fh.readline().strip().split(",")
+        if header != list(EXPORT_COLUMNS):
+            aside = out / f"results-old-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}.csv"
+            os.replace(old, aside)
+            notes.append(f"{old} had other columns (an older impactval?): moved to {aside.name}")
     df = store.rows(out=out)
     flat = export_frame(df)
     _atomic_write(out / "results.csv", lambda p: flat.to_csv(p, index=False))
@@ -394,6 +403,6 @@ def export(store: Store, out: str | Path) -> list[str]:
     import importlib.util
 
     if importlib.util.find_spec("pyarrow") is None:
-        return ["results.parquet not written: pip install pyarrow (or 'impactval[parquet]')"]
+        return notes + ["results.parquet not written: pip install pyarrow (or 'impactval[parquet]')"]
     _atomic_write(out / "results.parquet", lambda p: flat.to_parquet(p, index=False))
-    return []
+    return notes

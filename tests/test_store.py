@@ -143,3 +143,16 @@ def test_job_key_changes_with_what_decides_the_row_only(plate_scene):
               replace(base, scene=impactval.load_scene("beam_ss_midspan"))]
     keys = {base.key} | {j.key for j in others}
     assert len(keys) == 1 + len(others) and all(len(k) == 32 for k in keys)
+
+
+def test_an_older_results_csv_is_moved_aside_with_a_note(tmp_path):
+    (tmp_path / "results.csv").write_text("schema_version,run_id,err_t_m\n2,x,0.1\n")
+    db = Store(tmp_path / "impactval.sqlite")
+    db.begin_run("r", "test", tmp_path, {}, "ref")
+    db.put(_row(), run_id="r", position=0, reused=False)
+    notes = export(db, tmp_path)
+    aside = list(tmp_path.glob("results-old-*.csv"))
+    assert len(aside) == 1 and aside[0].read_text().startswith("schema_version,run_id,err_t_m\n2,x,0.1")
+    assert any("moved to results-old-" in n for n in notes)
+    assert pd.read_csv(tmp_path / "results.csv")["job_key"].tolist() == ["k1"]
+    assert export(db, tmp_path) == [] and len(list(tmp_path.glob("results-old-*.csv"))) == 1   # ours: kept
