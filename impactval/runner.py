@@ -297,7 +297,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     scheduler : Dask scheduler address ("tcp://host:8786"), Client or LocalCluster, optional
     force : bool
         Recompute jobs already in the store (the new rows replace the stored ones).
-    progress : object with start/started/done/note/close (see `impactval.progress`), optional
+    progress : object with start/started/done/close and optionally tick (see `impactval.progress`)
     out : directory, optional; recorded with the run (exports select runs by it)
     command, tag : recorded with the run
     keep_series : bool
@@ -386,6 +386,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
                 pending = set(futures)
                 while pending:
                     done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                    if progress is not None and hasattr(progress, "tick"):
+                        progress.tick()
                     for fut in done:
                         k = futures[fut]
                         try:
