@@ -341,9 +341,11 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         row = make_row(run_id, job.scene, job.spec, job.settings, res, refs.ref(job), refs.lin(job, res), k)
         meta = dict(engine_version=engines[job.spec], adapter_version=_adapter_version(job.spec),
                     reference_version=reference_version(), tol=float(job.tol),
-                    settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr))
+                    settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr),
+                    diagnostics=json.dumps(res.diagnostics or {}, sort_keys=True, default=repr),
+                    validity=json.dumps(list(res.validity or ())))
         stored = db.put(row, run_id=run_id, position=position[k], reused=False, force=force, meta=meta,
-                        series=pack_series(res) if keep_series and res.success else None)
+                        series=pack_series(res) if keep_series and res.success else None, contacts=res.contacts)
         rows[k] = stored
         if progress is not None:
             progress.done(job.label(), stored, seconds)

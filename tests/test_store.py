@@ -92,6 +92,9 @@ def test_series_are_kept_on_request(tmp_path, plate_scene):
     assert set(s) == {"t", "f", "delta", "x_ball", "x_structure", "energy"}
     assert len(s["t"]) == df["n_steps"][0] + 1 or len(s["t"]) == df["n_steps"][0]
     assert s["f"].max() == pytest.approx(df["f_m"][0], rel=1e-2)    # sampled peak vs parabola-refined
+    phases = Store(tmp_path / "impactval.sqlite").contact_phases(df["job_key"][0])
+    assert len(phases) == df["n_contacts"][0] == 1
+    assert phases["t_end"][0] - phases["t_start"][0] == df["t_m"][0] and phases["f_max"][0] == df["f_m"][0]
 
 
 @requires_mujoco
