@@ -64,6 +64,7 @@ def main() -> None:
     ap.add_argument("--dt", default="5e-8")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--scenes", default="")
+    ap.add_argument("--no-warm", action="store_true", help="skip the warm-up runs (caches already warm)")
     args = ap.parse_args()
     scenes = [s for s in args.scenes.split(",") if s]
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,8 +76,9 @@ def main() -> None:
         Path(root + "-hook", "sitecustomize.py").write_text(HOOK)
         print(f"main job: catalogue{' ' + ','.join(scenes) if scenes else ''}, engines mujoco,pybullet,exudyn; "
               f"old = {args.ref}, new = this tree")
-        run_job(root, args.dt, os.path.join(tmp, "warm-old"), scenes)        # warm caches (FE beams, kernels)
-        run_job(None, args.dt, os.path.join(tmp, "warm-new"), scenes)
+        if not args.no_warm:
+            run_job(root, args.dt, os.path.join(tmp, "warm-old"), scenes)        # warm caches (FE beams, kernels)
+            run_job(None, args.dt, os.path.join(tmp, "warm-new"), scenes)
         old, new = [], []
         for i in range(args.repeat):
             old.append(run_job(root, args.dt, os.path.join(tmp, f"o{i}"), scenes))
