@@ -29,6 +29,27 @@ class Hang(EngineAdapter):
         time.sleep(3600)  # pragma: no cover
 
 
+def _slow_mujoco():
+    from impactval.engines.mujoco_ import MujocoAdapter
+
+    class SlowMujoco(MujocoAdapter):
+        """MuJoCo, but each job first sleeps `SLOW_S` seconds: long enough to kill a run halfway."""
+
+        name = "slow-mujoco"
+
+        def build(self, scene, settings):
+            time.sleep(float(os.environ.get("IMPACTVAL_TEST_SLOW_S", "0.6")))
+            return super().build(scene, settings)
+
+    return SlowMujoco
+
+
+def __getattr__(name):          # "fake_engines:SlowMujoco" without importing MuJoCo's adapter up front
+    if name == "SlowMujoco":
+        return _slow_mujoco()
+    raise AttributeError(name)
+
+
 class Raises(EngineAdapter):
     """Raises an ordinary exception while simulating."""
 
@@ -78,24 +99,3 @@ class NeverLeaves(HertzSpringAdapter):
 
     def energy(self, model):
         return 1.0
-
-
-def _slow_mujoco():
-    from impactval.engines.mujoco_ import MujocoAdapter
-
-    class SlowMujoco(MujocoAdapter):
-        """MuJoCo, but each job first sleeps `SLOW_S` seconds: long enough to kill a run halfway."""
-
-        name = "slow-mujoco"
-
-        def simulate(self, scene, settings):
-            time.sleep(float(os.environ.get("IMPACTVAL_TEST_SLOW_S", "0.6")))
-            return super().simulate(scene, settings)
-
-    return SlowMujoco
-
-
-def __getattr__(name):          # "fake_engines:SlowMujoco" without importing MuJoCo's adapter up front
-    if name == "SlowMujoco":
-        return _slow_mujoco()
-    raise AttributeError(name)
