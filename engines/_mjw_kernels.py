@@ -46,13 +46,16 @@ def record(site_xpos: wp.array2d(dtype=wp.vec3), energy: wp.array(dtype=wp.vec2)
            qpos: wp.array2d(dtype=float), qvel: wp.array2d(dtype=float),
            nacon: wp.array(dtype=int), efc_address: wp.array2d(dtype=int), efc_force: wp.array2d(dtype=float),
            tip_site: int, hit_site: int, hit_top: float, alpha: float, native: int, nv: int, nq: int,
-           counter: wp.array(dtype=int), samples: wp.array2d(dtype=float), states: wp.array2d(dtype=float)):
-    """Runs after each `mjw.step`. Row k of `samples` gets the sample at the step's start (the
-    kinematics, constraint forces and energy mj_step computed): delta [m], contact force [N],
+           offset: int, counter: wp.array(dtype=int), samples: wp.array2d(dtype=float),
+           states: wp.array2d(dtype=float)):
+    """Runs after each `mjw.step` (k = steps so far). Row k + offset of `samples` gets the sample of
+    the kinematics, constraint forces and energy last computed: offset 0 = those `mjw.step` computed
+    for the step's start (Euler, implicitfast); offset 1 = those of an extra `mjw.forward` after the
+    step (RK4, whose last evaluation is its fourth stage). Columns: delta [m], contact force [N],
     downward displacement of the target's contact point [m], potential and kinetic energy [J].
     Row k+1 of `states` gets the state after the step (qpos then qvel)."""
     k = counter[0]
-    if k + 1 >= samples.shape[0]:
+    if k + 2 >= samples.shape[0]:
         return
     tip = site_xpos[0, tip_site]
     hit = site_xpos[0, hit_site]
@@ -65,11 +68,12 @@ def record(site_xpos: wp.array2d(dtype=wp.vec3), energy: wp.array(dtype=wp.vec2)
                 f = f + efc_force[0, adr]
     elif delta > 0.0:
         f = alpha * delta * wp.sqrt(delta)
-    samples[k, 0] = delta
-    samples[k, 1] = f
-    samples[k, 2] = hit_top - hit[2]
-    samples[k, 3] = energy[0][0]
-    samples[k, 4] = energy[0][1]
+    r = k + offset
+    samples[r, 0] = delta
+    samples[r, 1] = f
+    samples[r, 2] = hit_top - hit[2]
+    samples[r, 3] = energy[0][0]
+    samples[r, 4] = energy[0][1]
     for i in range(nq):
         states[k + 1, i] = qpos[0, i]
     for i in range(nv):

@@ -38,6 +38,11 @@ from impactval.engines.base import EngineAdapter, EngineSettings, Simulation
 from impactval.engines.mujoco_ import INTEGRATORS, MAX_TIME_FACTOR, MujocoAdapter
 from impactval.errors import EngineError
 
+#: default Hencky chain segment count. MuJoCo's 81 does not run in float32: the chain's joint-space
+#: mass matrix has cond(M) = 4.7e7 at N = 81 (1.3e7 at 51, 7.9e6 at 41), so mujoco_warp's float32
+#: factorisation returns M^-1 f with 57 % error at N = 81 (1 % at 41) and the first loaded step is NaN
+#: at any dt; N = 53-61 grow energy at dt = 1e-6; N = 51 runs and matches MuJoCo C within 0.1 %
+DEFAULT_SEGMENTS = 51
 #: steps replayed between host checks of the contact state
 CHUNK = 256
 #: largest number of contacts / constraint rows the Warp data holds (one contact pair, supports)
@@ -78,9 +83,14 @@ class MujocoWarpAdapter(EngineAdapter):
         for key in own:
             _bool_option(settings, key, True)
 
-    def _c_settings(self, settings: EngineSettings) -> EngineSettings:
+    def _c_settings(self, settings: EngineSettings, scene=None) -> EngineSettings:
+        """The settings MuJoCo C gets for the identical model (this adapter's options removed, the
+        chain's segment count fixed to this adapter's default)."""
         rest = tuple((k, v) for k, v in settings.options if k not in OPTIONS)
-        return EngineSettings(**{**settings.__dict__, "options": rest})
+        segments = settings.segments
+        if segments is None and scene is not None and scene.target.kind == "beam":
+            segments = DEFAULT_SEGMENTS
+        return EngineSettings(**{**settings.__dict__, "options": rest, "segments": segments})
 
     def _simulate(self, scene, settings: EngineSettings) -> Simulation:
         from impactval.engines._warp import CapturedStep, import_warp
@@ -93,7 +103,7 @@ class MujocoWarpAdapter(EngineAdapter):
 
         from impactval.engines import _mjw_kernels as K
 
-        c_settings = self._c_settings(settings)
+        c_settings = self._c_settings(settings, scene)
         mjm, mjd, lay, probe, info = _SameModelInC().build(scene, c_settings)
         mujoco.mj_forward(mjm, mjd)
         m = mjw.put_model(mjm)
@@ -119,12 +129,20 @@ class MujocoWarpAdapter(EngineAdapter):
         states = wp.zeros((n_max + 2, nq + nv), dtype=float, device="cpu")
         counter = wp.zeros(1, dtype=int, device="cpu")
         states0 = np.concatenate([mjd.qpos, mjd.qvel]).astype(np.float32)
+        rk4 = (settings.integrator or INTEGRATORS[0]) == "RK4"
+        offset = 1 if rk4 else 0
         rec_args = [d.site_xpos, d.energy, d.qpos, d.qvel, d.nacon, d.contact.efc_address, d.efc.force,
-                    probe.tip, probe.hit, float(lay.top), float(scene.alpha), int(native), nv, nq,
-                    counter, samples, states]
+                    probe.tip, probe.hit, float(lay.top), float(scene.alpha), int(native), nv, nq, offset]
+        if rk4:                              # sample 0 from a forward pass at t = 0
+            mjw.forward(m, d)
+            first = wp.array([-1], dtype=int, device="cpu")
+            wp.launch(K.record, dim=1, inputs=[*rec_args[:-1], 1, first, samples, states], device="cpu")
+        rec_args += [counter, samples, states]
 
         def one_step():
             mjw.step(m, d)
+            if rk4:
+                mjw.forward(m, d)
             wp.launch(K.record, dim=1, inputs=rec_args, device="cpu")
 
         stepper = CapturedStep(wp, one_step, capture=_bool_option(settings, "graph_capture", True))
@@ -141,9 +159,10 @@ class MujocoWarpAdapter(EngineAdapter):
             n_steps += n
             if _window_done(samples.numpy()[:n_steps], settings, scene):
                 break
-        n_rec = int(counter.numpy()[0])
+        n_steps = int(counter.numpy()[0])
+        n_rec = n_steps + offset                       # samples: one per step start (+ the end for RK4)
         s = samples.numpy()[:n_rec].astype(float)
-        st = states.numpy()[:n_rec + 1].astype(float)
+        st = states.numpy()[:n_steps + 1].astype(float)
         st[0] = states0
         t = np.arange(n_rec) * settings.dt
         qpos, qvel = st[:, :nq], st[:, nq:]
@@ -157,7 +176,7 @@ class MujocoWarpAdapter(EngineAdapter):
         if lay.kind == "beam":
             diagnostics["segments"] = lay.n_segments
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
-                         energy=energy, build_s=build_s, step_s=step_s, n_steps=n_rec,
+                         energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
                          settings={"integrator": settings.integrator or INTEGRATORS[0],
                                    "segments": lay.n_segments or None})

@@ -74,7 +74,7 @@ class NewtonAdapter(EngineAdapter):
 
     name = "newton"
     module = "newton"
-    contacts = ("native",)
+    contacts = ("native", "hertz")
     integrators = INTEGRATORS
 
     def version(self) -> str:
@@ -105,7 +105,8 @@ class NewtonAdapter(EngineAdapter):
                "segments": 0, "contact_stiffness": ke}
         target = scene.target
         if target.kind == "rigid-plate":
-            b.add_ground_plane(cfg=cfg)
+            if settings.contact == "native":
+                b.add_ground_plane(cfg=cfg)
             x_hit = 0.0
         elif target.kind == "beam":
             n = settings.segments or DEFAULT_SEGMENTS
@@ -115,7 +116,7 @@ class NewtonAdapter(EngineAdapter):
                 raise EngineError(f"newton: featherstone has no loop closures, so a {target.support} beam "
                                   f"(supports at both ends) cannot be built; use semi-implicit or xpbd.")
             x_hit = target.impact_x
-            self._chain(b, target, n, cfg, lay, wp, newton)
+            self._chain(b, target, n, cfg if settings.contact == "native" else None, lay, wp, newton)
         else:
             raise EngineError("newton: a modal target has no surface to collide with (contact is native only).")
         r = ball.radius
@@ -123,7 +124,8 @@ class NewtonAdapter(EngineAdapter):
         z0 = lay["top"] + r
         body = b.add_body(xform=wp.transform((x_hit, 0.0, z0), wp.quat_identity()), mass=ball.mass,
                           inertia=wp.mat33(ib, 0, 0, 0, ib, 0, 0, 0, ib), label="ball")
-        b.add_shape_sphere(body, radius=r, cfg=cfg)
+        if settings.contact == "native":           # injected Hertz: no shapes, no collisions
+            b.add_shape_sphere(body, radius=r, cfg=cfg)
         lay.update(ball=body, z0=z0)
         model = b.finalize(device="cpu")
         return model, lay
@@ -146,8 +148,9 @@ class NewtonAdapter(EngineAdapter):
             links.append(body)
             if i == hit:
                 off = beam.impact_x - i * l
-                b.add_shape_box(body, xform=wp.transform((off, 0.0, 0.0), wp.quat_identity()),
-                                hx=l / 2, hy=w / 2, hz=h / 2, cfg=cfg)
+                if cfg is not None:
+                    b.add_shape_box(body, xform=wp.transform((off, 0.0, 0.0), wp.quat_identity()),
+                                    hx=l / 2, hy=w / 2, hz=h / 2, cfg=cfg)
                 lay.update(hit_body=body, hit_local=(off, 0.0, h / 2), top=h / 2)
         joints = []
         k_root = 0.0 if beam.support == "simply-supported" else 2.0 * ei / l
@@ -213,10 +216,17 @@ class NewtonAdapter(EngineAdapter):
         pair = [s0, s1]
 
         # an even number of solver steps per replay keeps the captured state buffers in place
+        hertz = settings.contact == "hertz"
+        hertz_args = [model.body_com, ball, float(scene.ball.radius), lay["hit_body"], wp.vec3(*lay["hit_local"]),
+                      float(lay["top"]), float(scene.alpha)]
+
         def two_steps():
             for a, b in ((pair[0], pair[1]), (pair[1], pair[0])):
-                pipeline.collide(a, contacts)
                 a.clear_forces()
+                if hertz:
+                    wp.launch(K.hertz_force, dim=1, inputs=[a.body_q, *hertz_args, a.body_f], device="cpu")
+                else:
+                    pipeline.collide(a, contacts)
                 solver.step(a, b, control, contacts, dt)
                 wp.launch(K.record, dim=1, inputs=[b.body_q, b.body_qd, counter, states], device="cpu")
 
@@ -235,10 +245,13 @@ class NewtonAdapter(EngineAdapter):
         n_rec = int(counter.numpy()[0])
         delta, f, xs, xb, vb = self._series(states.numpy()[:n_rec + 1], first, lay, scene, nb)
         energy = self._energy(states.numpy()[:n_rec + 1], first, lay, scene, model, nb, delta)
+        if hertz:
+            f = scene.alpha * np.maximum(delta, 0.0) ** 1.5
+            energy += 0.4 * scene.alpha * np.maximum(delta, 0.0) ** 2.5 - 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
         t = np.arange(n_rec + 1) * dt
         diagnostics = {"compile_s": stepper.compile_s, "graph_capture": stepper.graph is not None,
                        "float": "float32", "contact_stiffness": lay["contact_stiffness"],
-                       "contact_law": "linear penalty ke = k0, kd = 0"}
+                       "contact_law": "hertz, injected into body_f" if hertz else "linear penalty ke = k0, kd = 0"}
         if integ == "semi-implicit":
             diagnostics["attach_ke"] = _option(settings, "attach_ke", ATTACH_KE)
         if lay["segments"]:
@@ -246,7 +259,7 @@ class NewtonAdapter(EngineAdapter):
         kind = "rigid-plate" if lay["kind"] == "rigid-plate" else f"hencky-chain-{lay['segments']}"
         return Simulation(t=t, delta=delta, f=f, x_ball=xb, x_structure=xs, v_ball=vb, energy=energy,
                           build_s=build_s, step_s=step_s, n_steps=n_rec,
-                          model=f"newton-{kind}-{integ}-float32", diagnostics=diagnostics,
+                          model=f"newton-{kind}-{integ}-{settings.contact}-float32", diagnostics=diagnostics,
                           settings={"integrator": integ, "segments": lay["segments"] or None})
 
     @staticmethod
