@@ -167,7 +167,8 @@ class NewtonAdapter(EngineAdapter):
                                  child_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()),
                                  axis=y_axis, stiffness=k_end, damping=0.0, target_ke=0.0, target_kd=0.0,
                                  label="pin")
-        lay["segments"] = n
+        lay.update(segments=n, segment_length=l, length=length,
+                   pinned_end=beam.support in ("simply-supported", "clamped-clamped"))
         lay["hinge_stiffness"] = [k_root] + [ei / l] * (n - 1)
         if beam.support in ("simply-supported", "clamped-clamped"):
             lay["hinge_stiffness"].append(k_end)      # the end pin: the last segment's absolute angle
@@ -186,8 +187,8 @@ class NewtonAdapter(EngineAdapter):
         integ = settings.integrator or INTEGRATORS[0]
         model, lay = self.build(scene, settings, wp, newton)
         if integ == "semi-implicit":
-            solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0,
-                                                       joint_attach_ke=_option(settings, "attach_ke", ATTACH_KE),
+            lay["attach_ke"] = _option(settings, "attach_ke", ATTACH_KE)
+            solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0, joint_attach_ke=lay["attach_ke"],
                                                        joint_attach_kd=0.0)
         elif integ == "featherstone":
             solver = newton.solvers.SolverFeatherstone(model, angular_damping=0.0)
@@ -304,7 +305,22 @@ class NewtonAdapter(EngineAdapter):
             pe += 0.5 * rel**2 @ k[:n]
             if len(k) > n:
                 pe += 0.5 * k[n] * theta[:, -1] ** 2
+            if lay.get("attach_ke"):
+                pe += 0.5 * lay["attach_ke"] * _joint_gaps_squared(chain, lay)
         return pe + ke
+
+
+def _joint_gaps_squared(chain: np.ndarray, lay: dict) -> np.ndarray:
+    """Sum over the chain's joints of |child anchor - parent anchor|^2 [m^2] per sample: the
+    stretch of SemiImplicit's penalty attachments (their energy is attach_ke/2 times this)."""
+    ns, n = chain.shape[:2]
+    l = lay["segment_length"]
+    pos, quat = chain[..., :3], chain[..., 3:]
+    tail = pos + _rotate(quat.reshape(-1, 4), np.array([l, 0.0, 0.0])).reshape(ns, n, 3)   # x = l end
+    gaps = np.sum((pos[:, 1:] - tail[:, :-1]) ** 2, axis=(1, 2)) + np.sum(pos[:, 0] ** 2, axis=1)
+    if lay["pinned_end"]:
+        gaps += np.sum((tail[:, -1] - np.array([lay["length"], 0.0, 0.0])) ** 2, axis=1)
+    return gaps
 
 
 def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
