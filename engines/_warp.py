@@ -26,11 +26,10 @@ def import_warp():
     """warp, initialised quietly on the CPU with the project's kernel cache."""
     path = cache_dir()
     path.mkdir(parents=True, exist_ok=True)
-    os.environ.setdefault("WARP_CACHE_PATH", str(path))
+    os.environ["WARP_CACHE_PATH"] = str(path)      # read by warp.init(): binaries go to <path>/<warp version>
     import warp as wp
 
     wp.config.log_level = 30          # warnings only: no banner, no per-module load lines
-    wp.config.kernel_cache_dir = str(path)
     wp.init()
     return wp
 
