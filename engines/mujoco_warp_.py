@@ -34,33 +34,37 @@ import time
 
 import numpy as np
 
-from impactval.engines.base import EngineAdapter, EngineSettings, Simulation
-from impactval.engines.mujoco_ import INTEGRATORS, MAX_TIME_FACTOR, MujocoAdapter
+from dataclasses import dataclass, fields, replace
+
+from impactval.engines.base import WINDOW_CAP, EngineAdapter, EngineSettings, Plan, Simulation, plate_times
+from impactval.engines.mujoco_ import INTEGRATORS, MujocoAdapter, MujocoOptions, default_segments
+from impactval.engines.options import boolean, one_of, option
 from impactval.errors import EngineError
 
-#: default Hencky chain segment count. MuJoCo's 81 does not run in float32: the chain's joint-space
-#: mass matrix has cond(M) = 4.7e7 at N = 81 (1.3e7 at 51, 7.9e6 at 41), so mujoco_warp's float32
-#: factorisation returns M^-1 f with 57 % error at N = 81 (1 % at 41) and the first loaded step is NaN
-#: at any dt; N = 53-61 grow energy at dt = 1e-6; N = 51 runs and matches MuJoCo C within 0.1 %
-DEFAULT_SEGMENTS = 51
-#: steps replayed between host checks of the contact state
-CHUNK = 256
+#: most chain segments the automatic sizing may choose. MuJoCo's sizing asks for more (93 on the
+#: worked beam), but the chain's joint-space mass matrix has cond(M) = 4.7e7 at N = 81 (1.3e7 at 51,
+#: 7.9e6 at 41), so mujoco_warp's float32 factorisation returns M^-1 f with 57 % error at N = 81 (1 %
+#: at 41) and the first loaded step is NaN at any dt; N = 53-61 grow energy at dt = 1e-6; N = 51 runs
+#: and matches MuJoCo C within 0.1 %. A larger settings.segments is built as asked (and may fail).
+MAX_SEGMENTS = 51
+#: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
+CHUNK = 64
 #: largest number of contacts / constraint rows the Warp data holds (one contact pair, supports)
 NCONMAX, NJMAX = 8, 32
-#: engine-specific options of this adapter on top of the MuJoCo adapter's
-OPTIONS = {
-    "compare_c": (bool, "also run the identical model in MuJoCo C and report the differences (default true)"),
-    "graph_capture": (bool, "replay one captured step as a Warp CPU graph (default true; false = plain launches)"),
-}
 
 
-def _bool_option(settings: EngineSettings, key: str, default: bool) -> bool:
-    value = settings.option(key, default)
-    if isinstance(value, str) and value.lower() in ("true", "false", "1", "0", "yes", "no"):
-        return value.lower() in ("true", "1", "yes")
-    if not isinstance(value, bool):
-        raise EngineError(f"mujoco-warp: option {key} must be true or false, got {value!r}.")
-    return value
+@dataclass(frozen=True)
+class MujocoWarpOptions(MujocoOptions):
+    """`--option mujoco-warp.KEY=VALUE`: the MuJoCo adapter's options (same model) plus these."""
+
+    rotary_inertia: str = option("section", "segment rotary inertia: 'section' = m (l^2 + h^2)/12 (default here: the "
+                                 "better-conditioned chain float32 can solve), 'none' = m l^2/12 (MuJoCo's default; "
+                                 "in float32 +1.7 % f_m vs C and 3.5 % energy error at N = 51)",
+                                 one_of("none", "section"))
+    compare_c: bool = option(True, "also run the identical model in MuJoCo C and report diagnostics['vs_mujoco_c'] "
+                             "(default true)", boolean)
+    graph_capture: bool = option(True, "replay one captured step as a Warp CPU graph (default true; false = plain "
+                                 "kernel launches, ~100x slower)", boolean)
 
 
 class MujocoWarpAdapter(EngineAdapter):
@@ -70,32 +74,44 @@ class MujocoWarpAdapter(EngineAdapter):
     module = "mujoco_warp"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
-
+    Options = MujocoWarpOptions
     def version(self) -> str:
         from importlib.metadata import version
 
         return f"{version('mujoco-warp')} (warp {version('warp-lang')}, float32, cpu)"
 
-    def check_settings(self, settings: EngineSettings) -> None:
-        own = {k: v for k, v in settings.options if k in OPTIONS}
-        rest = tuple((k, v) for k, v in settings.options if k not in OPTIONS)
-        MujocoAdapter().check_settings(EngineSettings(**{**settings.__dict__, "options": rest}))
-        for key in own:
-            _bool_option(settings, key, True)
+    def check_settings(self, settings: EngineSettings) -> EngineSettings:
+        settings = super().check_settings(settings)
+        if settings.segments is not None and settings.segments < 2:
+            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
+        return settings
 
-    def _c_settings(self, settings: EngineSettings, scene=None) -> EngineSettings:
-        """The settings MuJoCo C gets for the identical model (this adapter's options removed, the
-        chain's segment count fixed to this adapter's default)."""
-        rest = tuple((k, v) for k, v in settings.options if k not in OPTIONS)
+    # ------------------------------------------------------------------ the identical model in C
+    def c_settings(self, scene, settings: EngineSettings) -> EngineSettings:
+        """The settings MuJoCo C gets for the identical model: the MuJoCo options only, the chain's
+        segment count fixed (capped at MAX_SEGMENTS when sized automatically)."""
+        opts = settings.options
+        if isinstance(opts, tuple):
+            opts = self.parse(settings).options
+        c_opts = MujocoOptions(**{f.name: getattr(opts, f.name) for f in fields(MujocoOptions)})
         segments = settings.segments
-        if segments is None and scene is not None and scene.target.kind == "beam":
-            segments = DEFAULT_SEGMENTS
-        return EngineSettings(**{**settings.__dict__, "options": rest, "segments": segments})
+        if segments is None and scene.target.kind == "beam":
+            segments = min(default_segments(scene, replace(settings, options=c_opts)), MAX_SEGMENTS)
+        return replace(settings, options=c_opts, segments=segments)
 
-    def _simulate(self, scene, settings: EngineSettings) -> Simulation:
+    def plan(self, scene, settings: EngineSettings) -> Plan:
+        """MuJoCo's plan for the identical model (chain, stability limit, model error)."""
+        return _SameModelInC().plan(scene, self.c_settings(scene, settings))
+
+    def contact_law(self, scene, settings: EngineSettings):
+        return MujocoAdapter().contact_law(scene, self.c_settings(scene, settings))
+
+    def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
+        """The chain's natural frequencies [rad/s] from MuJoCo C's linearisation of the identical model."""
+        return MujocoAdapter().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
+
+    def simulate(self, scene, settings: EngineSettings) -> Simulation:
         from impactval.engines._warp import CapturedStep, import_warp
-        from impactval.reference.hertz import plate_impact
-
         t0 = time.perf_counter()
         wp = import_warp()
         import mujoco
@@ -103,8 +119,11 @@ class MujocoWarpAdapter(EngineAdapter):
 
         from impactval.engines import _mjw_kernels as K
 
-        c_settings = self._c_settings(settings, scene)
-        mjm, mjd, lay, probe, info = _SameModelInC().build(scene, c_settings)
+        c_settings = self.c_settings(scene, settings)
+        c_model = _SameModelInC()
+        run = c_model.build(scene, c_settings)
+        c_model.close(run)                  # restores MuJoCo C's callbacks; the model and data stay
+        mjm, mjd, lay, probe, info = run.model, run.data, run.lay, run.probe, dict(run.diagnostics)
         mujoco.mj_forward(mjm, mjd)
         m = mjw.put_model(mjm)
         d = mjw.put_data(mjm, mjd, nconmax=NCONMAX, njmax=NJMAX)
@@ -121,9 +140,9 @@ class MujocoWarpAdapter(EngineAdapter):
                 wp.launch(K.hertz_passive, dim=nv, inputs=args, device="cpu")
 
             m.callback = mjw.Callback(passive=passive)
-        plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
-        t_max = float(settings.option("max_time", MAX_TIME_FACTOR * plate.t_m + settings.tail))
-        n_max = int(math.ceil(t_max / settings.dt)) + 1
+        plate = plate_times(scene)
+        dt = float(settings.dt)
+        n_max = int(math.ceil((WINDOW_CAP * plate.t_m + settings.tail) / dt)) + 1
         nq, nv = mjm.nq, mjm.nv
         samples = wp.zeros((n_max + 2, 5), dtype=float, device="cpu")
         states = wp.zeros((n_max + 2, nq + nv), dtype=float, device="cpu")
@@ -145,32 +164,37 @@ class MujocoWarpAdapter(EngineAdapter):
                 mjw.forward(m, d)
             wp.launch(K.record, dim=1, inputs=rec_args, device="cpu")
 
-        stepper = CapturedStep(wp, one_step, capture=_bool_option(settings, "graph_capture", True))
+        stepper = CapturedStep(wp, one_step, capture=settings.options.graph_capture)
         stepper.warm_up()                  # the first real step: compiles or loads the kernels
         build_s = time.perf_counter() - t0
 
         step_s, n_steps = 0.0, 1
         ball_q = probe.ball_qpos
-        while n_steps < n_max:
-            n = min(CHUNK, n_max - n_steps)
+        chunk = max(CHUNK, int(1.1 * plate.t_m / dt))       # the first chunk covers a rigid-plate contact
+        end = None
+        while n_steps < n_max and end is None:
+            n = min(chunk, n_max - n_steps)
             ts = time.perf_counter()
             stepper.run(n)
             step_s += time.perf_counter() - ts
             n_steps += n
-            if _window_done(samples.numpy()[:n_steps], settings, scene):
-                break
+            chunk = CHUNK
+            end = window_end(samples.numpy()[:n_steps + offset], settings, scene)
         n_steps = int(counter.numpy()[0])
         n_rec = n_steps + offset                       # samples: one per step start (+ the end for RK4)
+        if end is not None:
+            n_rec = min(n_rec, end + 1)                # the window rule: stop at the contact's end + tail
         s = samples.numpy()[:n_rec].astype(float)
         st = states.numpy()[:n_steps + 1].astype(float)
         st[0] = states0
-        t = np.arange(n_rec) * settings.dt
+        t = np.arange(n_rec) * dt
         qpos, qvel = st[:, :nq], st[:, nq:]
         x_ball = mjm.qpos0[ball_q] - qpos[:n_rec, ball_q]
         v_ball = -qvel[:n_rec, probe.ball_dof]
         energy = self._energy(mujoco, mjm, settings, s, qvel, n_rec, info, scene)
         diagnostics = dict(info)
         diagnostics["compile_s"] = stepper.compile_s
+        diagnostics["steps_run"] = n_steps
         diagnostics["graph_capture"] = stepper.graph is not None
         diagnostics["float"] = "float32"
         if lay.kind == "beam":
@@ -180,7 +204,11 @@ class MujocoWarpAdapter(EngineAdapter):
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
                          settings={"integrator": settings.integrator or INTEGRATORS[0],
                                    "segments": lay.n_segments or None})
-        if _bool_option(settings, "compare_c", True):
+        if contact == "native" and info.get("contact_stiffness"):
+            from impactval.reference.hertz import ContactLaw
+
+            sim.contact_law = ContactLaw.linear(info["contact_stiffness"])
+        if settings.options.compare_c:
             diagnostics["vs_mujoco_c"] = self._vs_c(scene, c_settings, sim)
         return sim
 
@@ -230,16 +258,18 @@ class _SameModelInC(MujocoAdapter):
     def build(self, scene, settings: EngineSettings):
         import mujoco
 
-        model, data, lay, probe, info = super().build(scene, settings)
+        run = super().build(scene, settings)
         if settings.contact == "hertz":
-            return model, data, lay, probe, info
+            return run
+        model, info = run.model, run.diagnostics
         model.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_DIAGEXACT)
         a_exact = info["contact_inverse_mass"]
         a_approx = _contact_diag_approx(mujoco, model)
         model.pair_solref[0, 0] *= a_approx / a_exact
         info["contact_inverse_mass"] = a_approx
         info["contact_inverse_mass_exact"] = a_exact
-        return model, data, lay, probe, info
+        mujoco.mj_forward(model, run.data)
+        return run
 
 
 def _reanchor_connects(wp, mjw, mujoco, mjm, m, d) -> float:
@@ -275,17 +305,23 @@ def _contact_diag_approx(mujoco, model) -> float:
     return float(d.efc_diagA[rows[0]])
 
 
-def _window_done(samples: np.ndarray, settings: EngineSettings, scene) -> bool:
-    """True once the series blew up or the first contact ended `settings.tail` ago (samples: delta, f)."""
+def window_end(samples: np.ndarray, settings: EngineSettings, scene) -> int | None:
+    """Index of the last sample the run keeps, or None while the window is open. The base's rule
+    (engines/base.py): the first sample after the first contact with f <= 0 and delta <= 0, plus
+    ceil(tail/dt) samples; a blow-up (non-finite, or the ball through the target) ends it at once."""
     delta, f = samples[:, 0], samples[:, 1]
-    if not np.all(np.isfinite(delta)) or np.any(np.abs(delta) > 10 * scene.ball.radius):
-        return True
+    bad = ~np.isfinite(delta) | ~np.isfinite(f) | (delta > scene.ball.radius)
+    if bad.any():
+        return int(np.argmax(bad))
     on = f > 0
     if not on.any():
-        return False
+        return None
     first = int(np.argmax(on))
-    ends = np.flatnonzero(~on[first:] & (delta[first:] < 0))
-    return bool(ends.size) and (len(delta) - first - ends[0]) * settings.dt >= settings.tail
+    ends = np.flatnonzero(~on[first:] & (delta[first:] <= 0))
+    if not ends.size:
+        return None
+    last = first + int(ends[0]) + int(math.ceil(settings.tail / float(settings.dt)))
+    return last if last < len(delta) else None
 
 
 def _model_kind(lay) -> str:
