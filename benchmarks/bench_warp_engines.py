@@ -49,7 +49,8 @@ def main() -> None:
         line("mujoco-warp", "plate_steel", dt=dt, contact="native", options=(("compare_c", False),))
         line("newton", "plate_steel", dt=dt, contact="native")
     for contact in ("native", "hertz"):
-        line("mujoco", "beam_ss_midspan", dt=1e-6, contact=contact, segments=51)
+        line("mujoco", "beam_ss_midspan", dt=1e-6, contact=contact, segments=51,
+             options=(("rotary_inertia", "section"),))          # the chain mujoco-warp builds
         line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact=contact)
         line("newton", "beam_ss_midspan", dt=1e-6, contact=contact)
     line("newton", "beam_ss_midspan", dt=1e-6, contact="native", options=(("attach_ke", 3e9),))
