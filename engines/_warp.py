@@ -9,9 +9,12 @@ step are recorded once and replayed (`wp.capture_launch`), 12-15 us per step ins
 """
 from __future__ import annotations
 
+import math
 import os
 import time
 from pathlib import Path
+
+import numpy as np
 
 
 def cache_dir() -> Path:
@@ -67,3 +70,23 @@ class CapturedStep:
             for _ in range(n):
                 wp.capture_launch(self.graph)
         wp.synchronize()
+
+
+def window_end(samples: np.ndarray, settings, scene) -> int | None:
+    """Index of the last sample the run keeps (samples: rows of delta [m], force [N]; settings: the
+    job's EngineSettings), or None while the window is open. The base's rule
+    (engines/base.py): the first sample after the first contact with f <= 0 and delta <= 0, plus
+    ceil(tail/dt) samples; a blow-up (non-finite, or the ball through the target) ends it at once."""
+    delta, f = samples[:, 0], samples[:, 1]
+    bad = ~np.isfinite(delta) | ~np.isfinite(f) | (delta > scene.ball.radius)
+    if bad.any():
+        return int(np.argmax(bad))
+    on = f > 0
+    if not on.any():
+        return None
+    first = int(np.argmax(on))
+    ends = np.flatnonzero(~on[first:] & (delta[first:] <= 0))
+    if not ends.size:
+        return None
+    last = first + int(ends[0]) + int(math.ceil(settings.tail / float(settings.dt)))
+    return last if last < len(delta) else None

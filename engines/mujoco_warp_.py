@@ -12,9 +12,15 @@ Contact modes:
   impedance 1e-4, see engines/mujoco_.py);
 - "native-hertz": the MuJoCo adapter's fitted solimp shape (the fit runs in MuJoCo C).
 
+Model differences forced by float32 (measured, docs/mujoco-warp.md): the chain is capped at
+MAX_SEGMENTS = 51 and uses the section rotary inertia by default; `diagexact` is off (unsupported),
+the contact's direct solref rescaled to keep k0; connect anchors re-rounded to float32 kinematics.
+The C comparison uses the same model. Modal targets are not offered.
+
 Sampling: after each step a kernel stores the sample at the step's start (kinematics, constraint
 force and energy that `mjw.step` computed for it) and the new qpos/qvel, so no extra forward pass
-runs. Kinetic energy uses the mean of the velocities around a sample with the mass matrix of the
+runs (RK4: an extra `mjw.forward` after the step, whose state is sampled, since RK4's last
+evaluation is its fourth stage). The series ends by the base's window rule. Kinetic energy uses the mean of the velocities around a sample with the mass matrix of the
 initial configuration (Euler/implicitfast store half-step velocities; the chain moves by micrometres,
 so M(q) is constant to ~1e-7); RK4 uses the engine's own energy.
 
@@ -24,17 +30,16 @@ differences (Warp - C)/C of t_m, f_m and delta_m (plus the C values), so float32
 solver are told apart from the physics error.
 
 Timing: `wall_time_build_s` includes building the model and the first step, which compiles the
-Warp kernels (14-18 s cold, ~0.3-0.5 s from the cache, see engines/_warp.py);
+Warp kernels (14-18 s cold on an idle machine, 0.02-2 s from the cache, see engines/_warp.py);
 `diagnostics["compile_s"]` holds that first step alone. `wall_time_step_s` is the captured stepping.
 """
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
-
-from dataclasses import dataclass, fields, replace
 
 from impactval.engines.base import WINDOW_CAP, EngineAdapter, EngineSettings, Plan, Simulation, plate_times
 from impactval.engines.mujoco_ import INTEGRATORS, MujocoAdapter, MujocoOptions, default_segments
@@ -75,6 +80,7 @@ class MujocoWarpAdapter(EngineAdapter):
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
     Options = MujocoWarpOptions
+
     def version(self) -> str:
         from importlib.metadata import version
 
@@ -111,7 +117,11 @@ class MujocoWarpAdapter(EngineAdapter):
         return MujocoAdapter().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
 
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
-        from impactval.engines._warp import CapturedStep, import_warp
+        from impactval.engines._warp import CapturedStep, import_warp, window_end
+
+        if scene.target.kind == "modal":
+            raise EngineError("mujoco-warp: modal targets are not built (the Warp sampling reads the hit site of a "
+                              "plate or chain); use mujoco.")
         t0 = time.perf_counter()
         wp = import_warp()
         import mujoco
@@ -303,25 +313,6 @@ def _contact_diag_approx(mujoco, model) -> float:
     if rows.size != 1:
         raise EngineError(f"mujoco-warp: expected one contact row at first touch, found {rows.size}.")
     return float(d.efc_diagA[rows[0]])
-
-
-def window_end(samples: np.ndarray, settings: EngineSettings, scene) -> int | None:
-    """Index of the last sample the run keeps, or None while the window is open. The base's rule
-    (engines/base.py): the first sample after the first contact with f <= 0 and delta <= 0, plus
-    ceil(tail/dt) samples; a blow-up (non-finite, or the ball through the target) ends it at once."""
-    delta, f = samples[:, 0], samples[:, 1]
-    bad = ~np.isfinite(delta) | ~np.isfinite(f) | (delta > scene.ball.radius)
-    if bad.any():
-        return int(np.argmax(bad))
-    on = f > 0
-    if not on.any():
-        return None
-    first = int(np.argmax(on))
-    ends = np.flatnonzero(~on[first:] & (delta[first:] <= 0))
-    if not ends.size:
-        return None
-    last = first + int(ends[0]) + int(math.ceil(settings.tail / float(settings.dt)))
-    return last if last < len(delta) else None
 
 
 def _model_kind(lay) -> str:

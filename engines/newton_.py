@@ -7,35 +7,36 @@ Model (SI, z up, no gravity, no friction, no damping: `angular_damping = 0`, con
 - ball: a free body (sphere shape of the scene's radius, mass and inertia set explicitly) touching
   the target at t = 0 with velocity -v0;
 - rigid plate: Newton's ground plane;
-- beam: the Hencky chain of the MuJoCo adapter (N rigid segments of length l = L/N, mass rho*A*l,
-  in-plane rotary inertia m(l^2 + h^2)/12, revolute joints about y of stiffness EI/l, a box shape
-  on the hit segment only). Supports: simply supported = revolute joints to the world at x = 0
-  and x = L (the second closes a loop: SemiImplicit's penalty joints allow the axial give a real
-  beam has); clamped = a 2EI/l revolute spring to the world; cantilever = free end.
-  Out-of-plane rotary inertias are set to the in-plane one's order: they are never excited, and the
-  penalty joints (one `joint_attach_ke` for position and angle) would otherwise limit the step.
+- beam: the shared Hencky chain (`engines.chain.hencky_chain`: N rigid segments, mass rho*A*l, rotary
+  inertia m(l^2 + h^2)/12 by default (option rotary_inertia), revolute joints about y with passive
+  stiffness EI/l, 2EI/l at a clamp), a box shape on the hit segment only. N from the shared sizing
+  capped at MAX_SEGMENTS = 41 (SemiImplicit's penalty joints soften finer chains). Supports: simply
+  supported = revolute joints to the world at x = 0 and x = L (the second closes a loop:
+  SemiImplicit's penalty joints give the axial freedom a roller would); clamped ends add 2EI/l;
+  cantilever = free end. Out-of-plane inertias are the box's (never excited: the problem is planar).
+  Modal targets are not built.
 
-Contact: Newton's penalty contact, normal force ke*d with ke = the scene's k0 on both shapes
-(Newton averages the two) and kd = 0: a linear spring, compared with the linear theory
-(`contact_law` linear k0). The force series is ke*max(delta, 0) from the kinematics after each step.
+Contact "native": Newton's penalty contact, normal force ke*d with ke = the scene's k0 on both shapes
+(Newton averages the two) and kd = 0: a linear spring, compared with the linear theory (`contact_law`
+linear k0); the force series is ke*max(delta, 0) from the kinematics after each step. Contact
+"hertz": no shapes; a Warp kernel adds alpha*max(delta,0)^1.5 to `body_f` from the current poses.
 
 Integrators (`--integrator`): "semi-implicit" (default; SolverSemiImplicit, explicit penalty joints
-with joint_attach_ke = ATTACH_KE), "featherstone" (reduced coordinates; no loop closures, so only the
-plate and the cantilever), "xpbd" (SolverXPBD: positional contacts that ignore ke: a result, see
-docs/newton.md). Contact "hertz" (injected force) is not offered.
+with joint_attach_ke = ATTACH_KE, attach kd = 0), "featherstone" (reduced coordinates; no loop
+closures, so only the plate and the cantilever), "xpbd" (SolverXPBD: positional contacts that ignore
+ke: a result, see docs/newton.md). Build time (Newton's finalize + the first captured step, which
+compiles or loads kernels: `diagnostics["compile_s"]`) and stepping time are reported apart.
 """
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from dataclasses import dataclass
-
 from impactval.engines.base import WINDOW_CAP, EngineAdapter, EngineSettings, Plan, Simulation, plate_times
 from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
-from impactval.engines.mujoco_warp_ import window_end
 from impactval.engines.options import boolean, in_range, one_of, option, positive
 from impactval.errors import EngineError
 
@@ -170,7 +171,8 @@ class NewtonAdapter(EngineAdapter):
             self._chain(b, target, self.chain(scene, settings), cfg if settings.contact == "native" else None, lay,
                         wp, newton)
         else:
-            raise EngineError("newton: a modal target has no surface to collide with (contact is native only).")
+            raise EngineError("newton: modal targets are not built (only rigid bodies and the chain beam); use "
+                              "mujoco or exudyn.")
         r = ball.radius
         ib = 0.4 * ball.mass * r * r
         z0 = lay["top"] + r
@@ -224,7 +226,7 @@ class NewtonAdapter(EngineAdapter):
 
     # ------------------------------------------------------------------ stepping
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
-        from impactval.engines._warp import CapturedStep, import_warp
+        from impactval.engines._warp import CapturedStep, import_warp, window_end
 
         t0 = time.perf_counter()
         wp = import_warp()
