@@ -204,7 +204,6 @@ class MujocoWarpAdapter(EngineAdapter):
         energy = self._energy(mujoco, mjm, settings, s, qvel, n_rec, info, scene)
         diagnostics = dict(info)
         diagnostics["compile_s"] = stepper.compile_s
-        diagnostics["steps_run"] = n_steps
         diagnostics["graph_capture"] = stepper.graph is not None
         diagnostics["float"] = "float32"
         if lay.kind == "beam":

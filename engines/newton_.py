@@ -295,7 +295,8 @@ class NewtonAdapter(EngineAdapter):
             chunk = CHUNK
             delta, f = self._series(states.numpy()[:n_steps + 1], first, lay, scene, nb)[:2]
             end = window_end(np.column_stack([delta, f]), settings, scene)
-        n_rec = int(counter.numpy()[0])
+        n_stepped = int(counter.numpy()[0])        # steps run (stepping wall time covers all of them)
+        n_rec = n_stepped
         if end is not None:
             n_rec = min(n_rec, end)                  # the window rule: samples 0..end
         delta, f, xs, xb, vb = self._series(states.numpy()[:n_rec + 1], first, lay, scene, nb)
@@ -304,7 +305,7 @@ class NewtonAdapter(EngineAdapter):
             f = scene.alpha * np.maximum(delta, 0.0) ** 1.5
             energy += 0.4 * scene.alpha * np.maximum(delta, 0.0) ** 2.5 - 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
         t = np.arange(n_rec + 1) * dt
-        diagnostics = {"compile_s": stepper.compile_s, "graph_capture": stepper.graph is not None, "steps_run": n_steps,
+        diagnostics = {"compile_s": stepper.compile_s, "graph_capture": stepper.graph is not None,
                        "float": "float32", "contact_stiffness": lay["contact_stiffness"],
                        "contact_law": "hertz, injected into body_f" if hertz else "linear penalty ke = k0, kd = 0"}
         if integ == "semi-implicit":
@@ -313,7 +314,7 @@ class NewtonAdapter(EngineAdapter):
             diagnostics["segments"] = lay["segments"]
         kind = "rigid-plate" if lay["kind"] == "rigid-plate" else f"hencky-chain-{lay['segments']}"
         return Simulation(t=t, delta=delta, f=f, x_ball=xb, x_structure=xs, v_ball=vb, energy=energy,
-                          build_s=build_s, step_s=step_s, n_steps=n_rec,
+                          build_s=build_s, step_s=step_s, n_steps=n_stepped,
                           model=f"newton-{kind}-{integ}-{settings.contact}-float32", diagnostics=diagnostics,
                           settings={"integrator": integ, "segments": lay["segments"] or None},
                           contact_law=self.contact_law(scene, settings))
