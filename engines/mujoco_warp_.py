@@ -107,6 +107,7 @@ class MujocoWarpAdapter(EngineAdapter):
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
         """MuJoCo's plan for the identical model (chain, stability limit, model error)."""
+        _check_target(scene)
         return _SameModelInC().plan(scene, self.c_settings(scene, settings))
 
     def contact_law(self, scene, settings: EngineSettings):
@@ -119,9 +120,7 @@ class MujocoWarpAdapter(EngineAdapter):
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
         from impactval.engines._warp import CapturedStep, import_warp, window_end
 
-        if scene.target.kind == "modal":
-            raise EngineError("mujoco-warp: modal targets are not built (the Warp sampling reads the hit site of a "
-                              "plate or chain); use mujoco.")
+        _check_target(scene)
         t0 = time.perf_counter()
         wp = import_warp()
         import mujoco
@@ -312,6 +311,12 @@ def _contact_diag_approx(mujoco, model) -> float:
     if rows.size != 1:
         raise EngineError(f"mujoco-warp: expected one contact row at first touch, found {rows.size}.")
     return float(d.efc_diagA[rows[0]])
+
+
+def _check_target(scene) -> None:
+    if scene.target.kind not in ("rigid-plate", "beam"):
+        raise EngineError(f"mujoco-warp builds a rigid plate or a chain beam, not a {scene.target.kind!r} target "
+                          f"(the Warp sampling reads the hit site of a plate or chain); use mujoco or the reference.")
 
 
 def _model_kind(lay) -> str:

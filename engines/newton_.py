@@ -117,8 +117,8 @@ class NewtonAdapter(EngineAdapter):
         from impactval.engines.chain import model_error
         from impactval.reference.hertz import ContactLaw
 
-        if scene.target.kind == "modal":
-            return Plan()
+        if scene.target.kind not in ("rigid-plate", "beam"):
+            raise EngineError(f"newton builds a rigid plate or a chain beam, not a {scene.target.kind!r} target.")
         chain = self.chain(scene, settings)
         law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
         om, what = omega_max(scene, law, chain)

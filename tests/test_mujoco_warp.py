@@ -114,3 +114,10 @@ def test_beam_injected_hertz_within_1_5_percent(adapter, beam_scene):
     assert r.status == "ok", r.message
     for got, want in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m)):
         assert abs(rel(got, want)) <= 0.015
+
+
+def test_other_targets_are_skipped_rows_with_a_reason():
+    from impactval.engines.base import execute_job
+
+    r = execute_job("mujoco-warp", impactval.load_scene("modal_two_mode"), EngineSettings())
+    assert r.status == "skipped" and "rigid plate or a chain beam" in r.message

@@ -99,3 +99,10 @@ def test_featherstone_chain_equals_mujoco_chain(adapter):
     assert n.status == m.status == "ok", (n.message, m.message)
     for a, b in ((n.t_m, m.t_m), (n.f_m, m.f_m), (n.delta_m, m.delta_m)):
         assert abs(rel(a, b)) <= 5e-4
+
+
+def test_other_targets_are_skipped_rows_with_a_reason():
+    from impactval.engines.base import execute_job
+
+    r = execute_job("newton", impactval.load_scene("modal_two_mode"), EngineSettings())
+    assert r.status == "skipped" and "rigid plate or a chain beam" in r.message
