@@ -534,29 +534,46 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
 
 
 @njit(cache=True)
-def unresolved(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float) -> float:
-    """sum_i s_w[i] min(1, (omega_i H / phase)^6): the bound for modes a base step H does not resolve."""
+def unresolved_factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
+    """Measured error factor C of one mode at phase theta = omega H per base step: the value of the first
+    table point >= theta (a step function), ~theta^6 below the table; above it the larger of the last
+    value and c_tab[-1] * sqrt(w) / 4 (the error of a stiff unresolved mode falls like w^-3, not w^-3.5)."""
+    k = 0
+    nt = theta_tab.shape[0]
+    if theta <= theta_tab[0]:
+        x = theta / theta_tab[0]
+        x2 = x * x
+        return c_tab[0] * x2 * x2 * x2
+    while k < nt and theta_tab[k] < theta:
+        k += 1
+    if k < nt:
+        return c_tab[k]
+    return max(c_tab[nt - 1], 0.25 * c_tab[nt - 1] * sqrt_w)
+
+
+@njit(cache=True)
+def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab: np.ndarray,
+               c_tab: np.ndarray) -> float:
+    """sum_i s_w[i] C(omega_i H, w_i): the bound for the error of modes the base step H does not resolve."""
     total = 0.0
     for i in range(omega.shape[0]):
-        x = omega[i] * H / phase
-        x2 = x * x
-        v = x2 * x2 * x2
-        total += s_w[i] * (v if v < 1.0 else 1.0)
+        total += s_w[i] * unresolved_factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab)
     return total
 
 
 @njit(cache=True)
-def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, target: float) -> float:
+def largest_step(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab, c_tab,
+                 target: float) -> float:
     """The largest base step <= H whose unresolved-mode bound is <= target (bisection in log H)."""
-    if unresolved(s_w, omega, H, phase) <= target:
+    if unresolved(s_w, omega, sqrt_w, H, theta_tab, c_tab) <= target:
         return H
     lo = H
-    while unresolved(s_w, omega, lo, phase) > target and lo > 1e-30:
+    while unresolved(s_w, omega, sqrt_w, lo, theta_tab, c_tab) > target and lo > 1e-30:
         lo *= 0.125
     hi = H
     for _ in range(60):
         mid = np.sqrt(lo * hi)
-        if unresolved(s_w, omega, mid, phase) > target:
+        if unresolved(s_w, omega, sqrt_w, mid, theta_tab, c_tab) > target:
             hi = mid
         else:
             lo = mid
@@ -577,21 +594,23 @@ def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
 
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
-               est_order, phase, coeff, smallest_factor):
+               est_order, theta_tab, c_tab, smallest_factor):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
     base step count n, index of the node ending the first contact, largest |E/E0 - 1|).
     """
-    # weights of the unresolved-mode bound: coeff s w^-3.5, s = m0 g omega, w = omega delta/v0
+    # weights of the unresolved-mode bound: C(omega H) s w^-3.5, s = m0 g omega, w = omega delta/v0
     nm = omega.shape[0]
     s_w = np.empty(nm)
+    sqrt_w = np.empty(nm)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
-        s_w[i] = coeff * m0 * g[i] * omega[i] * w ** -3.5
+        s_w[i] = m0 * g[i] * omega[i] * w ** -3.5
+        sqrt_w[i] = np.sqrt(w)
     n = n0
     if nm > 0:
-        n = t_plate / largest_step(s_w, omega, t_plate / n, phase, tol / 4.0)
+        n = t_plate / largest_step(s_w, omega, sqrt_w, t_plate / n, theta_tab, c_tab, tol / 4.0)
     scale = 1.0 / (2.0**est_order - 1.0)
     for _ in range(12):
         H = t_plate / n
@@ -614,7 +633,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         fm_f = alpha * dm_f**1.5
         fm_c = alpha * dm_c**1.5
         rel = max(abs(tm_f - tm_c) / tm_f, max(abs(fm_f - fm_c) / fm_f, abs(dm_f - dm_c) / dm_f)) * scale
-        rel += unresolved(s_w, omega, H, phase)
+        rel += unresolved(s_w, omega, sqrt_w, H, theta_tab, c_tab)
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
             break
