@@ -513,24 +513,44 @@ def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
-    """The fine (base step H) and coarse (2H) runs that make one error estimate, in one call.
+    """The fine (base step H), coarse (2H) and coarsest (4H) runs that make one error estimate, in one call.
 
-    The tables for steps 2H/2^k, k = 0..J+1, serve both (coarse: k = 0..J, fine: k = 1..J+1), so the
-    smallest step scales with H and its error shows in the difference. Returns (status, n_nodes and
-    series of the fine run, its contacts, the coarse run's contacts); contacts rows are
-    (t_start, t_end, delta_max).
+    The tables for steps 4H/2^k, k = 0..J+2, serve all three (coarsest: k = 0..J, coarse: 1..J+1, fine:
+    2..J+2), so the smallest step scales with H and its error shows in the differences. Returns (status,
+    n_nodes and series of the fine run, its contacts, the coarse run's contacts, the coarsest run's);
+    contacts rows are (t_start, t_end, delta_max).
     """
-    Er, Ei, Kr, Ki, S = moments(omega, g, 2.0 * H, J + 1, p)
+    Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
+    st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er, Ei, Kr, Ki, S, max_nodes, 0)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
-                                        Er, Ei, Kr, Ki, S, max_nodes, 1)
-    if st != STATUS_OK or st_c != STATUS_OK:
-        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, np.zeros((0, 3)), np.zeros((0, 3))
+                                        Er, Ei, Kr, Ki, S, max_nodes, 2)
+    if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
+        z = np.zeros((0, 3))
+        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
     fine = contacts(t[:cnt], d[:cnt], fl[:cnt])
     coarse = contacts(tc[:cnt_c], dc[:cnt_c], flc[:cnt_c])
+    coarsest = contacts(tcc[:cnt_cc], dcc[:cnt_cc], flcc[:cnt_cc])
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
-            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse)
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
+
+
+@njit(cache=True)
+def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
+    """Error estimate of x_h from three step sizes H, 2H, 4H: |x_h - x_2h| / (r - 1) with the observed ratio
+    r = |x_2h - x_4h| / |x_h - x_2h| capped at 2^est_order (the assumed order: conservative once the
+    scheme is asymptotic); before it is (r < 2), the larger of the two differences. A ratio above 2^(p+2)
+    (p + 1 = 6 the scheme's order) means x_h and x_2h agree by accident: then d2 / 2^est_order."""
+    d1 = abs(x_h - x_2h)
+    d2 = abs(x_2h - x_4h)
+    if d1 == 0.0 or d2 > 128.0 * d1:
+        return max(d1, d2 / 2.0**est_order)
+    r = d2 / d1
+    if r < 2.0:
+        return max(d1, d2)
+    return d1 / (min(r, 2.0**est_order) - 1.0)
 
 
 @njit(cache=True)
@@ -594,7 +614,7 @@ def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
 
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
-               est_order, theta_tab, c_tab, smallest_factor):
+               est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
@@ -604,14 +624,18 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     nm = omega.shape[0]
     s_w = np.empty(nm)
     sqrt_w = np.empty(nm)
+    omega_c = np.empty(nm)
+    k_t = 1.5 * alpha * np.sqrt(delta_plate)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
         s_w[i] = m0 * g[i] * omega[i] * w ** -3.5
         sqrt_w[i] = np.sqrt(w)
+        # the frequency a mode rings at while the contact spring (tangent stiffness at the rigid-plate peak)
+        # holds it: a light mode (large s) is stiffened far above omega and needs shorter steps
+        omega_c[i] = np.sqrt(omega[i] * omega[i] + k_t * g[i] * omega[i])
     n = n0
     if nm > 0:
-        n = t_plate / largest_step(s_w, omega, sqrt_w, t_plate / n, theta_tab, c_tab, tol / 4.0)
-    scale = 1.0 / (2.0**est_order - 1.0)
+        n = t_plate / largest_step(s_w, omega_c, sqrt_w, t_plate / n, theta_tab, c_tab, unresolved_share * tol)
     for _ in range(12):
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
@@ -623,17 +647,18 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
             if out[0] == STATUS_OK:
                 break
             max_nodes *= 4
-        st, cnt, t, d, f, x, u, e, fl, fine, coarse = out
+        st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
         if st != STATUS_OK:
             return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf
         tm_f = fine[0, 1] - fine[0, 0]
         tm_c = coarse[0, 1] - coarse[0, 0]
+        tm_cc = coarsest[0, 1] - coarsest[0, 0]
         dm_f = fine[0, 2]
-        dm_c = coarse[0, 2]
-        fm_f = alpha * dm_f**1.5
-        fm_c = alpha * dm_c**1.5
-        rel = max(abs(tm_f - tm_c) / tm_f, max(abs(fm_f - fm_c) / fm_f, abs(dm_f - dm_c) / dm_f)) * scale
-        rel += unresolved(s_w, omega, sqrt_w, H, theta_tab, c_tab)
+        # relative; f_m = alpha delta_m^1.5 moves 1.5x as much as delta_m
+        rel_t = richardson(tm_f, tm_c, tm_cc, est_order) / tm_f
+        rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
+        rel = max(rel_t, 1.5 * rel_d)
+        rel += unresolved(s_w, omega_c, sqrt_w, H, theta_tab, c_tab)
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
             break
