@@ -30,6 +30,9 @@ from numba import njit
 
 STATUS_OK = 0
 STATUS_OUT_OF_NODES = 1
+#: free flight in a window advances in jumps of at most window / SERIES_SAMPLES (the series keeps about this
+#: many samples over a long window; contacts are integrated at full resolution)
+SERIES_SAMPLES = 20000
 
 
 @njit(cache=True)
@@ -153,10 +156,16 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0):
+def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0, omega=None,
+        sample_dt=0.0):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
     and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
     table level j + j0 (so one table set serves base steps H and H/2).
+
+    In the window, free flight (no force: ball and modes move exactly) advances in jumps of up to
+    `sample_dt` [s] (0: no jumps) whenever a jump provably cannot reach a contact: the gap x1 - x2 can
+    close no faster than u + sum omega_i |y_i|, and never closes once the ball moves away with
+    x1 < -sum |y_i| (free modes keep |y_i|). `omega` [rad/s] is needed for the jumps.
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
@@ -217,6 +226,58 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     while True:
         if count >= max_nodes:
             return STATUS_OUT_OF_NODES, count, ta, da, fa, xa, ua, ea, flags
+        # ---------------------------------------------------------------- free-flight jump (window only)
+        if (not in_contact) and t_end > 0.0 and sample_dt > 0.0 and omega is not None:
+            amp = 0.0
+            vel = 0.0
+            x2 = 0.0
+            for i in range(n):
+                a_i = np.sqrt(yr[i] * yr[i] + yi[i] * yi[i])
+                amp += a_i
+                vel += omega[i] * a_i
+                x2 += yi[i]
+            gap = x1 - x2                      # < 0 in free flight
+            h_safe = 0.0
+            if u <= 0.0 and x1 + amp < 0.0:
+                h_safe = np.inf                # moving away and out of reach of every mode
+            else:
+                if u + vel <= 0.0:
+                    h_safe = np.inf
+                elif gap < 0.0:
+                    h_safe = -gap / (u + vel)
+                if u > 0.0 and x1 + amp < 0.0:
+                    h_safe = max(h_safe, -(x1 + amp) / u)
+            h = min(0.5 * h_safe if h_safe < np.inf else sample_dt, sample_dt, t_end - t)
+            if h > 2.0 * H:
+                emod = 0.0
+                for i in range(n):
+                    cs_ = np.cos(omega[i] * h)
+                    sn_ = np.sin(omega[i] * h)
+                    a = cs_ * yr[i] - sn_ * yi[i]
+                    b = sn_ * yr[i] + cs_ * yi[i]
+                    yr[i] = a
+                    yi[i] = b
+                    emod += ew[i] * (a * a + b * b)
+                x2 = 0.0
+                for i in range(n):
+                    x2 += yi[i]
+                x1 = x1 + u * h
+                t = t + h
+                delta = x1 - x2
+                f = 0.0
+                ta[count] = t
+                da[count] = delta
+                fa[count] = 0.0
+                xa[count] = x1
+                ua[count] = u
+                ea[count] = 0.5 * m0 * u * u + 0.5 * emod
+                seg_start = count             # the force stencil restarts here (f = 0 before)
+                m_prev = -1
+                j_prev = 0
+                count += 1
+                if t >= t_end * (1 - 1e-12):
+                    return STATUS_OK, count, ta, da, fa, xa, ua, ea, flags
+                continue
         # ---------------------------------------------------------------- choose the step
         if in_contact:
             h_allow = H
@@ -526,7 +587,7 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
                                                    Er, Ei, Kr, Ki, S, max_nodes, 1)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
-                                        Er, Ei, Kr, Ki, S, max_nodes, 2)
+                                        Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / SERIES_SAMPLES)
     if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
         z = np.zeros((0, 3))
         return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
@@ -614,7 +675,8 @@ def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
 
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
-               est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25):
+               est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25,
+               node_cap=4000000, series_samples=SERIES_SAMPLES):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
@@ -640,10 +702,8 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
         max_nodes = int(6 * n + 60 * J + 50)
-        if window > 0.0:
-            max_nodes += int(2.5 * window / H)
         for _ in range(6):
-            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window, max_nodes)
+            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, 0.0, max_nodes)
             if out[0] == STATUS_OK:
                 break
             max_nodes *= 4
@@ -664,6 +724,22 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
             break
         grow = 1.1 * ratio ** (1.0 / est_order)
         n *= min(max(1.25, grow), 4.0)
+    if window > 0.0:
+        # the window once, at the chosen step (the same tables, so the first contact is the same run's)
+        Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
+        max_nodes = int(6 * n + 60 * J + 50 + 3 * min(series_samples, 1e6) + min(2.5 * window / H, 1e6))
+        while True:
+            max_nodes = min(max_nodes, node_cap)
+            st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window,
+                                                Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / series_samples)
+            if st == STATUS_OK or max_nodes >= node_cap:
+                break
+            max_nodes *= 4
+        if st != STATUS_OK:
+            return st, cnt, t, d, f, x, u, e, fl, fine, rel, n, 0, np.inf
+        t, d, f, x, u, e, fl = t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(), \
+            e[:cnt].copy(), fl[:cnt].copy()
+        fine = contacts(t, d, fl)
     # the first contact's end node (ball velocity there = rebound) and the largest energy drift
     end = 0
     for k in range(cnt):

@@ -164,27 +164,67 @@ def _rel(u: Metrics, m: Metrics) -> float:
 
 
 def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float = 1e-6,
-                window: float = 0.0) -> tuple[Run, Metrics]:
+                window: float = 0.0, series_samples: float = kernel.SERIES_SAMPLES) -> tuple[Run, Metrics]:
     """Solve to a relative time-step error estimate <= tol on t_m, f_m, delta_m.
 
     Returns the finer run and its (absolute) time-step uncertainty: the Richardson estimate of the
     fine/coarse pair (order ESTIMATE_ORDER assumed) plus the bound for modes the base step does not
     resolve; the base step shrinks until their sum is <= tol (the loop runs in kernel.solve_auto).
+    In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
+    (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
     plate = plate_impact(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
     # the base step is then shortened until modes it does not resolve stay within UNRESOLVED_SHARE tol (kernel)
     n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    check_window(window, plate.t_m, tol)
     st, cnt, t, d, f, x, u, e, flags, fine, rel, n, end, drift = kernel.solve_auto(
         omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
         P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, UNRESOLVED_THETA, UNRESOLVED_C, SMALLEST_STEP_FACTOR,
-        UNRESOLVED_SHARE)
-    if st != kernel.STATUS_OK:  # pragma: no cover - would need a pathological scene
-        raise ImpactvalError("reference solver did not finish the contact")
+        UNRESOLVED_SHARE, node_cap(len(omega)), float(series_samples))
+    if st != kernel.STATUS_OK:
+        if window > 0.0 and cnt > 0 and t[cnt - 1] > 0.0:
+            _refuse_window(window, float(t[cnt - 1]), int(cnt), len(omega))
+        raise ImpactvalError("reference solver did not finish the contact")  # pragma: no cover
     run = _make_run(alpha, t, d, f, x, u, e, fine, end, drift)
     m = run.metrics
     return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+
+
+#: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
+#: (work ~ nodes x modes; 4e9 ~ 10-30 s on one core)
+NODE_CAP, MODE_STEP_CAP = 4_000_000, 4e9
+#: bytes and (measured, one core) seconds per node and mode, for the estimate in a refusal
+_BYTES_PER_NODE, _S_PER_MODE_STEP = 49.0, 3e-9
+
+
+def node_cap(n_modes: int) -> int:
+    """The node budget of a windowed run with `n_modes` modes (memory and time bounded)."""
+    return int(max(100_000, min(NODE_CAP, MODE_STEP_CAP / max(n_modes, 1))))
+
+
+def check_window(window: float, t_plate: float, tol: float) -> None:
+    """Refuse up front a window whose end time double precision cannot resolve at the contact's smallest
+    step (~(SMALLEST_STEP_FACTOR tol)^0.4 t_plate): node times there would be off by more than 1e-3 step."""
+    smallest = (SMALLEST_STEP_FACTOR * tol) ** 0.4 * t_plate
+    limit = 1e-3 * smallest / np.finfo(float).eps
+    if window > limit:
+        raise ImpactvalError(
+            f"window {window:g} s is too long for this scene: at its end double-precision time resolves only "
+            f"{window * np.finfo(float).eps:.1g} s, coarser than the contact needs ({1e-3 * smallest:.1g} s); "
+            f"use a window of at most {limit:.3g} s (--window).")
+
+
+def _refuse_window(window: float, t_reached: float, nodes: int, n_modes: int) -> None:
+    """The windowed run hit its node budget: refuse with the estimate for the whole window."""
+    est = nodes * (window / t_reached)
+    fits = min(t_reached, window)
+    raise ImpactvalError(
+        f"window {window:g} s needs about {est:.2g} steps (~{est * _BYTES_PER_NODE / 1e9:.2g} GB, "
+        f"~{est * max(n_modes, 1) * _S_PER_MODE_STEP:.2g} s): the ball stays within reach of the structure; "
+        f"the budget of {nodes} steps covered {t_reached:.3g} s; use a window of at most {0.9 * fits:.3g} s "
+        f"(--window).")
 
 
 def _check_tol(tol: float) -> float:
@@ -255,7 +295,7 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
     prev = None
     while True:
         md = structure_modes(scene, n, residual=residual)
-        run, unc = solve_modes(md, mass, alpha, v0, tol / 4.0, window)
+        run, unc = solve_modes(md, mass, alpha, v0, tol / 4.0)
         if prev is not None:
             p_run, p_unc, p_n = prev
             a, b = p_run.metrics, run.metrics
@@ -265,6 +305,9 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
             trunc = Metrics(k * (abs(a.t_m - b.t_m) + unc.t_m), k * (abs(a.f_m - b.f_m) + unc.f_m),
                             k * (abs(a.delta_m - b.delta_m) + unc.delta_m))
             if _rel(trunc, a) + _rel(p_unc, a) <= tol or n >= 20000:
+                if window > 0.0:       # the same n-mode run again, on through the window
+                    p_run, _ = solve_modes(structure_modes(scene, p_n, residual=residual), mass, alpha, v0,
+                                           tol / 4.0, window)
                 return p_run, p_unc, p_n, trunc
         prev = (run, unc, n)
         n *= 2

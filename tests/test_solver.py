@@ -5,7 +5,8 @@ import pytest
 import impactval
 from impactval.reference.hertz import plate_impact
 from impactval.reference.ode import solve_ode
-from impactval.reference.solve import structure_modes
+from impactval.errors import ImpactvalError
+from impactval.reference.solve import solve_modes, structure_modes
 
 
 def test_plate_matches_closed_form_to_1e8():
@@ -59,3 +60,50 @@ def test_energy_converges_and_is_conserved_at_tight_tolerance():
     errs = [impactval.solve(scene, tol=tol, modes=20).energy_error for tol in (1e-5, 1e-7, 1e-9)]
     assert errs[0] > errs[1] > errs[2]
     assert impactval.solve(scene, tol=1e-10, modes=20).energy_error <= 1e-9
+
+
+def test_long_window_streams_free_flight_and_keeps_the_first_contact_exact():
+    """Issue 14: a 1000 s window on the heavy ball finishes with every re-contact, in bounded memory: free
+    flight jumps ahead where no contact can occur, the series keeps ~SERIES_SAMPLES nodes plus the contacts'."""
+    from impactval.reference.kernel import SERIES_SAMPLES
+
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    short = impactval.solve(scene, tol=1e-6, window=0.1)
+    long = impactval.solve(scene, tol=1e-6, window=1000.0)
+    assert long.t[-1] == pytest.approx(1000.0 + long.contacts[0].t_end, rel=1e-9)
+    assert len(long.t) < 5 * SERIES_SAMPLES
+    assert long.metrics == short.metrics                     # the first contact is the same run
+    assert len(long.contacts) == len(short.contacts) >= 30   # all re-contacts are within the first 0.1 s
+    assert np.all(np.isfinite(long.energy)) and long.energy_error < 1e-6
+    # the ball leaves for good: last sample's velocity is the free-flight velocity, away from the beam
+    assert long.x_ball[-1] < -1.0 and np.all(np.diff(long.t) > 0)
+
+
+def test_free_flight_jumps_keep_recontacts_as_the_ode_has_them():
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    md = structure_modes(scene, 6)
+    window = 0.012
+    _, info = solve_ode(md, scene.ball.mass, scene.alpha, scene.ball.velocity, rtol=1e-12, atol=1e-14,
+                        window=window)
+    run, _ = solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-8, window=window,
+                         series_samples=200)          # coarse samples: long jumps between contacts
+    assert len(run.contacts) == len(info["ends"]) >= 7
+    for c, s, e in zip(run.contacts, info["starts"], info["ends"]):
+        assert c.t_start == pytest.approx(s, abs=1e-9)
+        assert c.t_end == pytest.approx(e, abs=1e-9)
+
+
+def test_window_beyond_double_precision_is_refused_up_front():
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    with pytest.raises(ImpactvalError, match=r"window 1e\+09 s is too long.*at most .* s \(--window\)"):
+        impactval.solve(scene, window=1e9)
+
+
+def test_window_over_the_node_budget_is_refused_with_an_estimate(monkeypatch):
+    from impactval.reference import solve as solve_mod
+
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    monkeypatch.setattr(solve_mod, "node_cap", lambda n_modes: 3000)
+    with pytest.raises(ImpactvalError, match=r"window 1 s needs about .* steps \(~.* GB, ~.* s\).*at most"):
+        solve_mod.solve_modes(structure_modes(scene, 8), scene.ball.mass, scene.alpha, scene.ball.velocity,
+                              1e-6, window=1.0, series_samples=1e9)
