@@ -23,6 +23,7 @@ from impactval.reference import kernel
 from impactval.reference.beams import Modes, beam_modes, truncate_modes
 from impactval.reference.hertz import plate_impact
 from impactval.reference.result import Contact, ImpactResult, Metrics
+from impactval.reference.validity import hertz_validity
 
 #: polynomial degree of the force interpolation (order of the scheme: P_DEGREE + 1)
 P_DEGREE = 5
@@ -272,8 +273,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         run, unc = solve_modes(md, mass, alpha, v0, tol, window)
         n_modes = md.n
     m = run.metrics
+    validity = hertz_validity(scene, m.f_m, m.delta_m)
+    if _rel(unc, m) > tol * (1 + 1e-9):
+        validity += (f"uncertainty {_rel(unc, m):.2g} (relative) is above tol {tol:g}: the mode count or step "
+                     f"reached its limit",)
     return ImpactResult(
-        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m,
+        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m, validity=validity,
         uncertainty=unc, modes=n_modes, t=run.t, f=run.f, delta=run.delta, x_ball=run.x_ball,
         x_structure=run.x_ball - run.delta, energy=run.energy, rebound_velocity=run.rebound_velocity,
         energy_error=run.energy_error, contacts=run.contacts,
