@@ -86,6 +86,14 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
+    if window:
+        from impactval.reference.hertz import plate_impact
+        from impactval.reference.solve import _check_tol, check_window
+
+        if not (math.isfinite(window) and window >= 0):
+            raise ImpactvalError(f"--window must be a non-negative time in s, got {window!r}.")
+        for sc in scenes_:      # refuse up front, before any output
+            check_window(window, plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity).t_m, _check_tol(tol))
     _warn_if_compiling()
     if not as_json:
         click.echo(f"{'scene':24s} {'t_m [us]':>22s} {'f_m [N]':>24s} {'delta_m [um]':>22s} "

@@ -107,3 +107,54 @@ def test_window_over_the_node_budget_is_refused_with_an_estimate(monkeypatch):
     with pytest.raises(ImpactvalError, match=r"window 1 s needs about .* steps \(~.* GB, ~.* s\).*at most"):
         solve_mod.solve_modes(structure_modes(scene, 8), scene.ball.mass, scene.alpha, scene.ball.velocity,
                               1e-6, window=1.0, series_samples=1e9)
+
+
+def _scene(ball, target):
+    from impactval.scenarios.scene import scene_from_dict
+
+    return scene_from_dict({"name": "extreme", "ball": ball, "target": target})
+
+
+_BEAM = {"kind": "beam", "material": "steel", "support": "simply-supported", "length": 0.5, "width": 0.01,
+         "height": 0.01, "impact_at": 0.5}
+
+
+@pytest.mark.parametrize("label,ball,target,ode_modes", [
+    ("delta_m 1.5e-9 m, plate", {"radius": 1e-3, "velocity": 1e-4, "material": "steel"},
+     {"kind": "rigid-plate", "material": "steel"}, None),
+    ("delta_m 2e-10 m, beam", {"radius": 1e-3, "velocity": 1e-5, "material": "steel"}, dict(_BEAM, modes=12), 12),
+    ("modal mass 1e-3 x ball", {"radius": 0.01, "velocity": 1.0, "material": "steel"},
+     {"kind": "modal", "material": "steel", "omega": [3e4, 1.5e5], "modal_mass": [3.27e-5, 3.27e-5], "phi": [1, 1]},
+     2),
+    ("modal mass 1e3 x ball", {"radius": 0.01, "velocity": 1.0, "material": "steel"},
+     {"kind": "modal", "material": "steel", "omega": [3e4, 1.5e5], "modal_mass": [32.7, 32.7], "phi": [1, 1]}, 2),
+    ("ball 33 kg on a slender beam", {"radius": 0.1, "velocity": 0.5, "material": "steel"},
+     dict(_BEAM, height=0.005, modes=10), 10),
+    ("ball 0.5 mg on a beam", {"radius": 5e-4, "velocity": 0.5, "material": "steel"}, dict(_BEAM, modes=10), 10),
+])
+def test_reference_holds_at_the_extremes(label, ball, target, ode_modes):
+    """Issue 14 point 3: finite, converged, uncertainty under tol, and within it of an independent answer."""
+    scene = _scene(ball, target)
+    r = impactval.solve(scene, tol=1e-6)
+    m = r.metrics
+    assert all(np.isfinite([m.t_m, m.f_m, m.delta_m])) and m.t_m > 0 and m.delta_m > 0
+    for key in ("t_m", "f_m", "delta_m"):
+        assert getattr(r.uncertainty, key) <= 1e-6 * getattr(m, key)
+    if ode_modes is None:
+        truth = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    else:
+        truth, _ = solve_ode(structure_modes(scene, ode_modes), scene.ball.mass, scene.alpha, scene.ball.velocity,
+                             rtol=1e-12, atol=1e-14)
+    for key in ("t_m", "f_m", "delta_m"):
+        assert abs(getattr(m, key) - getattr(truth, key)) <= getattr(r.uncertainty, key), f"{label}: {key}"
+
+
+@pytest.mark.slow
+def test_ten_thousand_modes_converge():
+    """10,000 modes (w up to ~1e6): the tol = 1e-6 answer is within its uncertainty of the tol = 1e-9 one."""
+    scene = impactval.load_scene("beam_ss_midspan")
+    r = impactval.solve(scene, tol=1e-6, modes=10000)
+    tight = impactval.solve(scene, tol=1e-9, modes=10000)
+    assert r.modes == 10000
+    for key in ("t_m", "f_m", "delta_m"):
+        assert abs(getattr(r, key) - getattr(tight, key)) <= getattr(r.uncertainty, key) <= 1e-6 * getattr(r, key)

@@ -82,3 +82,10 @@ def test_reference_cli_shows_validity_and_explain_states_both_mode_counts():
     used = impactval.solve(impactval.load_scene("heavy_ball_slender_beam"), tol=1e-6).modes
     assert f"modes the solve used at tol 1e-06: {used} " in out.output
     assert "modes needed (first-order weights" in out.output
+
+
+@pytest.mark.parametrize("window", ["1e9", "1e300", "inf", "nan", "-1"])
+def test_absurd_windows_are_refused_before_any_output(window):
+    out = CliRunner().invoke(main, ["reference", "heavy_ball_slender_beam", "--window", window])
+    assert out.exit_code == 2 and "Traceback" not in out.output
+    assert "window" in out.output and "t_m [us]" not in out.output
