@@ -603,11 +603,12 @@ def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
     """Error estimate of x_h from three step sizes H, 2H, 4H: |x_h - x_2h| / (r - 1) with the observed ratio
     r = |x_2h - x_4h| / |x_h - x_2h| capped at 2^est_order (the assumed order: conservative once the
     scheme is asymptotic); before it is (r < 2), the larger of the two differences. A ratio above 2^(p+2)
-    (p + 1 = 6 the scheme's order) means x_h and x_2h agree by accident: then d2 / 2^est_order."""
+    (p + 1 = 6 the scheme's order) means x_h and x_2h agree by accident: then d2 / 2^(p + 1), x_2h's error
+    carried down one halving at the scheme's order."""
     d1 = abs(x_h - x_2h)
     d2 = abs(x_2h - x_4h)
     if d1 == 0.0 or d2 > 128.0 * d1:
-        return max(d1, d2 / 2.0**est_order)
+        return max(d1, d2 / 64.0)
     r = d2 / d1
     if r < 2.0:
         return max(d1, d2)
