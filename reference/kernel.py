@@ -691,11 +691,11 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     k_t = 1.5 * alpha * np.sqrt(delta_plate)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
-        s_w[i] = m0 * g[i] * omega[i] * w ** -3.5
+        s_w[i] = m0 * g[i] * omega[i] * max(w, 1.0) ** -3.5     # a mode below the impact frequency: weight s
         sqrt_w[i] = np.sqrt(w)
         # the frequency a mode rings at while the contact spring (tangent stiffness at the rigid-plate peak)
         # holds it: a light mode (large s) is stiffened far above omega and needs shorter steps
-        omega_c[i] = np.sqrt(omega[i] * omega[i] + k_t * g[i] * omega[i])
+        omega_c[i] = np.sqrt(omega[i] * omega[i] + k_t * (g[i] * omega[i]))
     n = n0
     if nm > 0:
         n = t_plate / largest_step(s_w, omega_c, sqrt_w, t_plate / n, theta_tab, c_tab, unresolved_share * tol)

@@ -253,8 +253,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     static_correction : bool
         With an automatic mode count, add the residual static flexibility of the dropped modes.
     """
+    if not (hasattr(scene, "ball") and hasattr(scene, "target")):
+        hint = f" (call impactval.solve(impactval.load_scene({scene!r})))" if isinstance(scene, str) else ""
+        raise ImpactvalError(f"solve() needs a Scene from impactval.load_scene(), got {type(scene).__name__} "
+                             f"{scene!r:.60}{hint}.")
     tol = _check_tol(tol)
-    if not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
+    if isinstance(window, bool) or not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
         raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
     if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
         raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
@@ -273,6 +277,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         run, unc = solve_modes(md, mass, alpha, v0, tol, window)
         n_modes = md.n
     m = run.metrics
+    values = (m.t_m, m.f_m, m.delta_m, unc.t_m, unc.f_m, unc.delta_m, run.rebound_velocity)
+    if not all(math.isfinite(v) for v in values) or min(m.t_m, m.f_m, m.delta_m) <= 0.0:
+        raise ImpactvalError(f"scene {scene.name!r}: the reference solver got a non-finite or non-positive answer "
+                             f"(t_m={m.t_m!r}, f_m={m.f_m!r}, delta_m={m.delta_m!r}): an input is outside the range "
+                             f"double precision can carry (check the ball's and target's sizes, masses and "
+                             f"frequencies).")
     validity = hertz_validity(scene, m.f_m, m.delta_m)
     if _rel(unc, m) > tol * (1 + 1e-9):
         validity += (f"uncertainty {_rel(unc, m):.2g} (relative) is above tol {tol:g}: the mode count or step "

@@ -158,3 +158,21 @@ def test_ten_thousand_modes_converge():
     assert r.modes == 10000
     for key in ("t_m", "f_m", "delta_m"):
         assert abs(getattr(r, key) - getattr(tight, key)) <= getattr(r.uncertainty, key) <= 1e-6 * getattr(r, key)
+
+
+@pytest.mark.parametrize("bad", ["plate_steel", None, 3])
+def test_solve_wants_a_scene(bad):
+    with pytest.raises(ImpactvalError, match="solve\\(\\) needs a Scene from impactval.load_scene"):
+        impactval.solve(bad)
+
+
+def test_a_nearly_free_mode_is_a_free_mass():
+    """omega = 1e-300 rad/s (issue 18: NaN uncertainties were printed): finite, and the ODE form agrees."""
+    scene = _scene({"radius": 0.01, "velocity": 1.0, "material": "steel"},
+                   {"kind": "modal", "material": "steel", "omega": [1e-300, 1e5], "modal_mass": [0.1, 0.1],
+                    "phi": [1.0, 1.0]})
+    r = impactval.solve(scene, tol=1e-6)
+    truth, _ = solve_ode(structure_modes(scene), scene.ball.mass, scene.alpha, scene.ball.velocity, rtol=1e-12,
+                         atol=1e-14)
+    for key in ("t_m", "f_m", "delta_m"):
+        assert abs(getattr(r, key) - getattr(truth, key)) <= getattr(r.uncertainty, key) <= 1e-6 * getattr(r, key)
