@@ -75,7 +75,9 @@ def extremes(scene, engines, axes, under, dt, contact, integrator, segments, opt
     pred = None
     if predictability:
         dts = sorted({float(x) for x in df["dt"] if isinstance(x, float) and math.isfinite(x)})
-        pred = predict_fn(sc, names, dts, settings=settings, tol=tol, store=db, workers=jobs)
+        segs = [int(x) for x in df.get("segments", []) if str(x).isdigit()]
+        pred = predict_fn(sc, names, dts, settings=settings, tol=tol, store=db, workers=jobs,
+                          segments=segments or (min(segs) if segs else None))
     md = write(df, out, pred)
     for line in safe_region(df):
         click.echo(line)

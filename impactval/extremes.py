@@ -453,6 +453,10 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
                 stored = _num(row.get("dt_limit"))
                 if math.isfinite(stored):
                     lim = dataclasses.replace(lim, dt_limit=stored)
+        if math.isfinite(lim.dt_limit) and "predicted limit none (implicit)" in str(rec.get("message", "")):
+            # an unguarded job's plan reports no limit; the message gets the real prediction back
+            rec["message"] = rec["message"].replace("predicted limit none (implicit)",
+                                                    f"predicted limit {lim.dt_limit:.3g} s")
         rec.update(dt_limit=lim.dt_limit, dt_limit_what=lim.what, dt_contact=lim.dt_contact, dt_tunnel=lim.dt_tunnel)
         dt = rec.get("dt", math.nan)
         rec["limit_ratio"] = dt / lim.dt_limit if math.isfinite(lim.dt_limit) and lim.dt_limit > 0 else math.nan
@@ -492,6 +496,12 @@ class Onset:
     first_unstable: float
     predicted: float
     what: str
+    smallest: float = math.nan
+
+    @property
+    def whole_axis(self) -> bool:
+        """Broken from the smallest value on: the onset is at or below the grid, not measured."""
+        return math.isfinite(self.first_unstable) and self.first_unstable == self.smallest
 
     @property
     def ratio(self) -> float:
@@ -525,7 +535,7 @@ def onsets(df, axis: str = "dt") -> list[Onset]:
         lim = lim[lim > 0]
         out.append(Onset(str(key[0]), key[1] if len(key) > 1 else None, float(ok.max()) if len(ok) else math.nan,
                          first, float(lim.median()) if len(lim) else math.nan,
-                         str(g["dt_limit_what"].iloc[0]) if "dt_limit_what" in g else ""))
+                         str(g["dt_limit_what"].iloc[0]) if "dt_limit_what" in g else "", float(g[axis].min())))
     return out
 
 

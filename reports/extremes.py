@@ -43,6 +43,12 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _along(g: pd.DataFrame, axis) -> pd.DataFrame:
+    """Rows in the axis's order (works for mixed material names and numbers)."""
+    order = {v: i for i, v in enumerate(axis.values)}
+    return g.assign(_order=g[axis.name].map(order)).sort_values("_order").drop(columns="_order")
+
+
 def _pos(values: list, x: float) -> float:
     """Index position of x along an axis's sorted numeric values (log-interpolated); NaN outside."""
     v = np.asarray(values, float)
@@ -77,7 +83,7 @@ def safe_region(df: pd.DataFrame) -> list[str]:
     for engine, g in df.groupby("engine", sort=False):
         groups = [(None, g)] if other is None else list(g.groupby(other.name, sort=False))
         for ov, gg in groups:
-            gg = gg.sort_values(x.name)
+            gg = _along(gg, x)
             runs = ok_ranges(list(gg[x.name]), list(gg["cell_status"]))
             ou = f" {other.unit}" if other is not None and other.unit and isinstance(ov, (int, float)) else ""
             when = "" if other is None else f" when {other.name} = {_fmt(ov)}{ou}"
@@ -90,12 +96,15 @@ def safe_region(df: pd.DataFrame) -> list[str]:
                 text = "never ok: " + ", ".join(f"{k} x{v}" for k, v in counts.items())
             o = ons.get((engine, ov if other is not None and x.name == "dt" else None))
             if x.name == "dt" and o is not None:
-                if math.isfinite(o.first_unstable):
+                if o.whole_axis:
+                    text += (f"; broken over the whole axis, already at dt = {o.first_unstable:.3g} s = "
+                             f"{o.ratio:.2f} x the predicted {o.predicted:.3g} s: not a time-step limit")
+                elif math.isfinite(o.first_unstable):
                     pred = f"predicted {o.predicted:.3g} s, observed/predicted {o.ratio:.2f}" \
                         if math.isfinite(o.predicted) else "no predicted limit"
                     text += f"; broken from dt = {o.first_unstable:.3g} s on ({pred})"
                 elif math.isfinite(o.predicted):
-                    text += f"; no instability up to {gg[x.name].max():.3g} s (predicted limit {o.predicted:.3g} s)"
+                    text += f"; no instability up to {max(gg[x.name]):.3g} s (predicted limit {o.predicted:.3g} s)"
             lines.append(f"{engine}{_setting(gg)}{when}: {text}.")
     return lines
 
@@ -138,14 +147,14 @@ def heatmap(df: pd.DataFrame, path: str | Path) -> Path | None:
         top.set_title(f"{df.attrs.get('scene', '')}: status along {ax0.label()} "
                       f"(| = predicted dt_limit, : = v0*dt = delta_m)", fontsize=9)
         for i, e in enumerate(engines):
-            g = df[df["engine"] == e].sort_values(ax0.name)
+            g = _along(df[df["engine"] == e], ax0)
             for col, style in (("limit_ratio", "-"), ("tunnel_ratio", ":")):
                 p = _crossing(list(g[ax0.name]), list(g[col]), vals) if ax0.numeric else math.nan
                 if math.isfinite(p):
                     top.plot([p, p], [i - 0.5, i + 0.5], style, color="white", lw=3)
                     top.plot([p, p], [i - 0.5, i + 0.5], style, color="black", lw=1.4)
         for i, e in enumerate(engines):
-            g = df[df["engine"] == e].sort_values(ax0.name)
+            g = _along(df[df["engine"] == e], ax0)
             xs = np.arange(len(vals))
             err = pd.to_numeric(g["max_abs_err"], errors="coerce").to_numpy() if "max_abs_err" in g else np.full(len(g), np.nan)
             idx = [vals.index(v) for v in g[ax0.name]]
@@ -252,7 +261,7 @@ def markdown(df: pd.DataFrame, png: str | None = None, predict: pd.DataFrame | N
                 "| engine | other axis | largest ok dt [s] | first unstable dt [s] | predicted dt_limit [s] | "
                 "observed / predicted | predicted for |", "|---|---|---:|---:|---:|---:|---|"]
         for o in onsets(df, "dt"):
-            r = f"{o.ratio:.2f}" if math.isfinite(o.ratio) else ""
+            r = ("<= " if o.whole_axis else "") + f"{o.ratio:.2f}" if math.isfinite(o.ratio) else ""
             out.append(f"| {o.engine} | {'' if o.other is None else _fmt(o.other)} | {_fmt(o.largest_ok)} | "
                        f"{_fmt(o.first_unstable)} | {_fmt(o.predicted)} | {r} | {o.what} |")
     if png:

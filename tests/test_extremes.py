@@ -110,6 +110,10 @@ def test_onsets_need_every_larger_step_broken():
     df.attrs["axes"] = [Axis("dt", (1, 2, 3, 4, 5))]
     (o,) = onsets(df)
     assert o.first_unstable == 4 and o.largest_ok == 3 and o.ratio == pytest.approx(4 / 3.5)
+    assert not o.whole_axis
+    df["cell_status"] = "unstable"
+    (o,) = onsets(df)
+    assert o.whole_axis and o.first_unstable == 1 and math.isnan(o.largest_ok)
 
 
 # ---------------------------------------------------------------------------- maps
@@ -161,6 +165,9 @@ def test_cli_writes_report_and_refuses_bad_axis(tmp_path):
     md = (out / "extremes.md").read_text()
     assert "## Safe region" in md and md.count("| HertzSpringAdapter") + md.count(f"| {FAKE} |") == 4
     assert (out / "extremes.csv").exists()
+    res = CliRunner().invoke(impactval.cli.main, ["extremes", "plate_steel", "--engines", FAKE, "--axis",
+                                                  "stiffness=pmma,1e13", "--out", str(tmp_path / "mixed"), "-j", "1"])
+    assert res.exit_code == 0 and "ok (all errors under 1 %) for stiffness in [pmma, 1e+13] Pa" in res.output
     res = CliRunner().invoke(impactval.cli.main, ["extremes", "plate_steel", "--engines", FAKE, "--axis", "spin=1"])
     assert res.exit_code == 2 and "unknown axis 'spin'" in res.output and "Traceback" not in res.output
 
@@ -169,6 +176,18 @@ def test_perturbations_are_small(beam):
     p = {x.what: x for x in perturbations(beam, segments=20)}
     assert p["v0"].scene.ball.velocity / beam.ball.velocity - 1 == pytest.approx(1e-6)
     assert p["impact point"].scene.target.impact_at - beam.target.impact_at == pytest.approx(0.1 / 20)
+
+
+def test_predictability_flags_a_jump_and_not_a_smooth_change(plate_scene):
+    """A contact law that jumps 10 % at v0 = 1 + 5e-7 m/s is flagged (f_m moves ~ 1.1^(2/5) - 1 = 3.9 %
+    against the reference's 1.2e-6); the smooth closed form is not."""
+    from impactval.extremes import predictability
+
+    df = predictability(plate_scene, [FAKE, "extremes_fakes:Jumpy"], [1e-7], workers=1)
+    smooth, jumpy = (df[df["engine"] == e].iloc[0] for e in (FAKE, "extremes_fakes:Jumpy"))
+    assert not smooth["jumped"] and abs(smooth["change_f_m"] - smooth["ref_change_f_m"]) < 1e-6
+    assert jumpy["jumped"] and "f_m changed" in jumpy["why"]
+    assert jumpy["change_f_m"] == pytest.approx(1.1 ** 0.4 - 1, rel=1e-3)
 
 
 @requires_mujoco
