@@ -463,7 +463,7 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
         rec["tunnel_ratio"] = dt / lim.dt_tunnel if math.isfinite(lim.dt_tunnel) and lim.dt_tunnel > 0 else math.nan
         out_rows.append(rec)
     df = pd.DataFrame(out_rows)
-    df.attrs.update(axes=list(axes), under=under, scene=scene.name, engines=list(engines))
+    df.attrs.update(axes=list(axes), under=under, scene=scene.name, engines=list(engines), tol=tol)
     return df
 
 

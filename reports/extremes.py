@@ -61,11 +61,11 @@ def _pos(values: list, x: float) -> float:
 def _setting(g: pd.DataFrame) -> str:
     parts = []
     integ = next((str(x) for x in g.get("integrator", []) if isinstance(x, str) and x), "")
-    seg = next((str(x) for x in g.get("segments", []) if str(x) not in ("", "nan")), "")
+    segs = sorted({int(x) for x in g.get("segments", []) if str(x).isdigit()})
     if integ:
         parts.append(integ)
-    if seg:
-        parts.append(f"N = {seg}")
+    if segs:
+        parts.append(f"N = {segs[0]}" if len(segs) == 1 else f"N = {segs[0]}..{segs[-1]}")
     return f" ({', '.join(parts)})" if parts else ""
 
 
@@ -282,6 +282,13 @@ def markdown(df: pd.DataFrame, png: str | None = None, predict: pd.DataFrame | N
                    f"{'' if not isinstance(unc, float) or not math.isfinite(unc) else f'{unc:.1e}'} | "
                    f"{msg.replace('|', '/')} |")
     warn = sorted({str(w) for w in df.get("ref_validity", pd.Series(dtype=str)).dropna() if str(w)})
+    tol = df.attrs.get("tol")
+    if tol and "ref_uncertainty" in df:
+        unc = pd.to_numeric(df.drop_duplicates("scene")["ref_uncertainty"], errors="coerce")
+        loose = df.drop_duplicates("scene")[unc > max(tol, 0.1 * under)]
+        for _, r in loose.iterrows():
+            warn.append(f"{r['scene']}: reference uncertainty {r['ref_uncertainty']:.2g} (relative) is above "
+                        f"max(tol, --under / 10) = {max(tol, 0.1 * under):.2g}: its cells are not judged reliably")
     if warn:
         out += ["", "## Where the reference's assumptions fail", ""] + [f"- {w}" for w in warn]
     if predict is not None and len(predict):

@@ -2,6 +2,7 @@
 survives a crashing and a hanging engine, the CLI, and the bar: the observed first-unstable dt of
 MuJoCo and PyBullet within a factor 2 of the predicted dt_limit, on the rigid plate and on a beam
 the engines were not tuned on (tests/extremes/beam_titanium_ss_04.toml)."""
+import importlib.util
 import math
 from pathlib import Path
 
@@ -165,6 +166,8 @@ def test_cli_writes_report_and_refuses_bad_axis(tmp_path):
     md = (out / "extremes.md").read_text()
     assert "## Safe region" in md and md.count("| HertzSpringAdapter") + md.count(f"| {FAKE} |") == 4
     assert (out / "extremes.csv").exists()
+    if importlib.util.find_spec("matplotlib"):
+        assert (out / "extremes.png").stat().st_size > 10_000 and "![stability map](extremes.png)" in md
     res = CliRunner().invoke(impactval.cli.main, ["extremes", "plate_steel", "--engines", FAKE, "--axis",
                                                   "stiffness=pmma,1e13", "--out", str(tmp_path / "mixed"), "-j", "1"])
     assert res.exit_code == 0 and "ok (all errors under 1 %) for stiffness in [pmma, 1e+13] Pa" in res.output
@@ -227,3 +230,15 @@ def test_first_unstable_dt_within_factor_2_of_prediction(scene_name, engine):
         pytest.skip(f"{engine} not installed")
     ratio = _onset_ratio(impactval.load_scene(scene_name), engine)
     assert 0.5 <= ratio <= 2.0, f"observed/predicted first unstable dt = {ratio:.3f}"
+
+
+def test_report_names_a_loose_reference():
+    from impactval.reports.extremes import markdown
+
+    df = pd.DataFrame(dict(engine=["e", "e"], velocity=[1.0, 2.0], scene=["s[v=1]", "s[v=2]"],
+                           cell_status=["ok", "ok"], ref_uncertainty=[1e-7, 0.05], ref_validity=["", "delta_m/R = 0.2"]))
+    df.attrs.update(axes=[Axis("velocity", (1.0, 2.0), "m/s")], under=0.01, tol=1e-6, scene="s", engines=["e"])
+    md = markdown(df)
+    assert "s[v=2]: reference uncertainty 0.05" in md and "s[v=1]: reference" not in md
+    assert "- delta_m/R = 0.2" in md
+    assert "e: ok (all errors under 1 %) for velocity in [1, 2] m/s." in md
