@@ -377,5 +377,7 @@ def _print_rows(df, as_json: bool, text_table) -> None:
         click.echo(json.dumps(clean))
 
 
+main.add_command(__import__("impactval.cli_extremes", fromlist=["extremes"]).extremes)  # issue 14
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
