@@ -305,5 +305,7 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
         sys.exit(1)
 
 
+main.add_command(__import__("impactval.cli_sweep").cli_sweep.sweep_command)   # impactval sweep (issue 13)
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
