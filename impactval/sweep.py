@@ -224,8 +224,22 @@ def with_score(df: pd.DataFrame) -> pd.DataFrame:
     d["cost_s"] = pd.to_numeric(d["wall_time_step_s"], errors="coerce")
     integ = d["integrator"].fillna("").astype(str)
     d["integrator"] = [i or DEFAULT_INTEGRATOR.get(e, "") for i, e in zip(integ, d["engine"].astype(str))]
-    d["segments"] = d["segments"].fillna("").astype(str).replace({"nan": ""})
+    d["segments"] = [_size_text(v) for v in d["segments"]]
     return d
+
+
+def _size_text(v: Any) -> str:
+    """A structure size cell as text: 41, 41.0 and "41" -> "41"; empty/NaN -> ""."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return ""
+    text = str(v).strip()
+    if text.lower() == "nan":
+        return ""
+    try:
+        f = float(text)
+        return str(int(f)) if f.is_integer() else text
+    except ValueError:
+        return text
 
 
 #: the columns that name one configuration except dt (a series in dt)
