@@ -395,9 +395,8 @@ def explain_order(engine: str, integrator: str, metric: str, order: float, targe
     """Why the observed order of `metric` is what it is, in words."""
     text = _explain_order(engine, integrator, metric, order, target_kind, contact)
     if math.isfinite(order) and not clean:
-        text += (f". The points scatter up to a factor {scatter:.2g} about this least-squares law (no sub-range "
-                 f"follows one power law): the error constant depends on where touch and separation fall inside "
-                 f"a step, so read the order as an envelope")
+        text += (". Envelope: no sub-range follows one power law (see the scatter column); the error constant "
+                 "depends on where touch and separation fall inside a step")
     return text
 
 
@@ -410,7 +409,7 @@ def _explain_order(engine: str, integrator: str, metric: str, order: float, targ
                     "(O(dt^2)) depends on where the steps fall and scatters")
         return "no dt range with a clean power law in this grid (points scatter, change sign or sit on a floor)"
     if not math.isfinite(nominal):
-        return f"observed order {order:.2f}; nominal order of {name} unknown"
+        return f"nominal order of {name} unknown"
     head = f"{name}, nominal order {nominal:g}: "
     if abs(order - nominal) <= 0.3:
         return head + "observed as nominal"
@@ -424,11 +423,11 @@ def _explain_order(engine: str, integrator: str, metric: str, order: float, targ
                "infinite there), which caps a fixed-step method near order 2.5 whatever its nominal order")
         if metric == "t_m" and target_kind not in ("", "rigid-plate"):
             why += ("; t_m is also read by linear interpolation of delta between two steps, an O(dt^2) read-out")
-        return head + f"observed {order:.2f} < nominal because " + why
+        return head + "lower observed order because " + why
     if order < nominal and contact == "native":
-        return head + (f"observed {order:.2f} < nominal: the engine's native contact switches on and off between "
+        return head + ("lower observed order: the engine's native contact switches on and off between "
                        "steps (an event the integrator does not locate), which limits the order")
-    return head + f"observed {order:.2f}; the difference from the nominal order is not explained by this tool"
+    return head + "the observed order differs from the nominal one for a reason this tool does not identify"
 
 
 def fit_orders(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> pd.DataFrame:
@@ -489,8 +488,16 @@ def floors(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> pd.Da
         cause = _floor_cause(d, g, fine, floor, reached, (scene_kinds or {}).get(scene, ""))
         rows.append(dict(scene=scene, engine=engine, contact=contact, integrator=integrator, segments=segments,
                          floor=floor, dt_floor=float(g["dt"].iloc[k]), dt_finest=float(fine["dt"]), reached=reached,
-                         cause=cause))
-    return pd.DataFrame(rows, columns=[*SERIES, "floor", "dt_floor", "dt_finest", "reached", "cause"])
+                         cause_kind=_cause_kind(cause), cause=cause))
+    return pd.DataFrame(rows, columns=[*SERIES, "floor", "dt_floor", "dt_finest", "reached", "cause_kind", "cause"])
+
+
+def _cause_kind(cause: str) -> str:
+    """The first cause named in a floor's text, as a short label."""
+    for kind in ("no floor", "reference", "float precision", "structure discretisation", "contact law"):
+        if cause.startswith(kind) or cause.startswith("the " + kind):
+            return kind
+    return "not identified"
 
 
 def _floor_cause(d: pd.DataFrame, g: pd.DataFrame, fine: pd.Series, floor: float, reached: bool, kind: str) -> str:

@@ -54,6 +54,14 @@ def _setting(r) -> str:
 
 
 # ---------------------------------------------------------------------------- sweep.md
+#: a floor's cause in words when several structure sizes share it (details in the Floors table)
+_FLOOR_WORDS = {
+    "structure discretisation": "structure discretisation: the error follows the segment count, not dt "
+                                "(details in the Floors table)",
+    "reference": "the reference's own tolerance: tighten --tol",
+    "float precision": "float precision (roundoff)",
+    "contact law": "contact law: the native contact is a linear spring, the reference is Hertz",
+}
 def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str, str] | None = None,
                    plots: list[Path] | None = None, tol: float | None = None) -> str:
     """The sweep report: per scene and engine what a person reads in a minute (cheapest setting under
@@ -64,6 +72,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     stab = sw.stability(df)
     cheap = sw.cheapest(df, unders)
     st = d["status"].astype(str)
+    why: list[str] = []          # explanations of the orders, numbered once for the whole report
     out = ["# impactval sweep", "",
            f"{len(d)} cells: {int((st == 'ok').sum())} ok, {int((st == 'unstable').sum())} unstable, "
            f"{int((~st.isin(['ok', 'unstable', 'skipped', 'not-installed'])).sum())} failed otherwise, "
@@ -83,21 +92,23 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                 out.append(f"- **Under {_pct(c['under'])} %: none in this grid** (best reached "
                            f"{_pct(c['best_score'])} % with {_setting(c)}).")
         o = orders[(orders["scene"] == scene) & (orders["engine"] == engine)]
-        for (integ, seg), og in o.groupby(["integrator", "segments"], sort=False):
-            out.append(f"- **Order in dt**, {integ}, N = {_n(seg)}: {_orders_sentence(og)}")
+        for integ, og in o.groupby("integrator", sort=False):
+            out.append(f"- **Order in dt**, {integ}: {_orders_sentence(og, why)}")
         f = floors[(floors["scene"] == scene) & (floors["engine"] == engine)]
-        for _, r in f.iterrows():
-            if r["reached"]:
-                out.append(f"- **Floor**, {r['integrator']}, N = {_n(r['segments'])}: {_pct(r['floor'])} % "
-                           f"from dt <= {_g(r['dt_floor'])} s (finer steps gain < {100 * sw.FLOOR_FRACTION:g} %); "
-                           f"set by {r['cause']}.")
-            else:
-                out.append(f"- **Floor**, {r['integrator']}, N = {_n(r['segments'])}: not reached "
-                           f"({_pct(r['floor'])} % at dt = {_g(r['dt_finest'])} s, still falling).")
+        for (integ, kind), fg in f.groupby(["integrator", "cause_kind"], sort=False):
+            if kind == "no floor":
+                sizes = ", ".join(f"{_pct(r['floor'])} % at {_g(r['dt_finest'])} s" for _, r in fg.iterrows())
+                out.append(f"- **Floor**, {integ}: not reached in this grid ({sizes}; still falling: refine dt).")
+                continue
+            sizes = ", ".join((f"N = {r['segments']}: " if r["segments"] else "") +
+                              f"{_pct(r['floor'])} % from dt <= {_g(r['dt_floor'])} s" for _, r in fg.iterrows())
+            detail = fg["cause"].iloc[0] if len(fg) == 1 else _FLOOR_WORDS.get(kind, fg["cause"].iloc[0])
+            out.append(f"- **Floor**, {integ} ({sizes}): {detail}.")
         s = stab[(stab["scene"] == scene) & (stab["engine"] == engine)]
-        for _, r in s.iterrows():
-            out.append(f"- **Stability**, {r['integrator']}, N = {_n(r['segments'])}: {_stability_sentence(r)}")
+        out.append(f"- **Stability**: {_stability_summary(s)}")
         out.append("")
+    if why:
+        out += ["Why these orders:", ""] + [f"{k + 1}. {text}" for k, text in enumerate(why)] + [""]
     if plots:
         out += ["## Plots", ""] + [f"![{p.stem}]({p.name})" for p in plots] + [""]
     out += ["## Cheapest setting under each tolerance", ""]
@@ -117,7 +128,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                     f"{_g(r['dt_min'])} - {_g(r['dt_max'])}" if math.isfinite(r["order"]) else "",
                     _g(r["scatter"], "{:.2f}") + ("" if r["clean"] else " (envelope)"), r["explanation"]]
                    for _, r in orders.iterrows()])
-    out += ["", "## Floors", ""]
+    out += ["", "## Floors (where refining dt stops helping)", ""]
     out += _table(["scene", "engine", "integrator", "N", "floor %", "from dt [s]", "reached", "cause"],
                   [[r["scene"], r["engine"], r["integrator"], _n(r["segments"]), _pct(r["floor"]), _g(r["dt_floor"]),
                     "yes" if r["reached"] else "no", r["cause"]] for _, r in floors.iterrows()])
@@ -147,22 +158,41 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     return "\n".join(out) + "\n"
 
 
-def _orders_sentence(og: pd.DataFrame) -> str:
-    """'2.03 in t_m, f_m, delta_m (dt 1e-8 - 2e-6 s): why' with metrics of the same order merged."""
-    fitted = og[og["order"].notna()]
-    if fitted.empty:
-        return "no power law in this grid: " + str(og["explanation"].iloc[0]) + "."
+def _orders_sentence(og: pd.DataFrame, why: list[str]) -> str:
+    """'2.03 (t_m, f_m, delta_m; N = 21, 41; nominal 1) [1]': metrics and sizes of one integrator
+    with the same explanation merged; explanations go to `why` and are cited by number."""
     parts = []
-    for why, wg in fitted.groupby("explanation", sort=False):
-        mets = ", ".join(wg["metric"])
+    fitted = og[og["order"].notna()]
+    for text, wg in fitted.groupby("explanation", sort=False):
+        if text not in why:
+            why.append(text)
         lo, hi = wg["order"].min(), wg["order"].max()
         val = f"{lo:.2f}" if hi - lo < 0.05 else f"{lo:.2f}-{hi:.2f}"
-        rng = f"dt {_g(wg['dt_min'].min())} - {_g(wg['dt_max'].max())} s"
-        parts.append(f"{val} in {mets} ({rng}): {why}")
-    missing = og[og["order"].isna()]
-    if len(missing):
-        parts.append(f"{', '.join(missing['metric'])}: {missing['explanation'].iloc[0]}")
+        mets = ", ".join(dict.fromkeys(wg["metric"]))
+        sizes = ", ".join(_n(x) for x in dict.fromkeys(wg["segments"]))
+        nominal = wg["nominal_order"].iloc[0]
+        nom = f"; nominal {nominal:g}" if math.isfinite(nominal) else ""
+        env = "" if wg["clean"].all() else ", envelope"
+        parts.append(f"**{val}** ({mets}; N = {sizes}{nom}{env}) [{why.index(text) + 1}]")
+    for text, mg in og[og["order"].isna()].groupby("explanation", sort=False):
+        if text not in why:
+            why.append(text)
+        parts.append(f"none for {', '.join(dict.fromkeys(mg['metric']))} [{why.index(text) + 1}]")
     return "; ".join(parts) + "."
+
+
+def _stability_summary(s: pd.DataFrame) -> str:
+    """One line: where each series went unstable, and the predicted limits."""
+    bits = []
+    for _, r in s.iterrows():
+        if math.isfinite(r["dt_limit_observed"]) or math.isfinite(r["dt_limit_predicted"]):
+            bits.append(f"{r['integrator']} N = {_n(r['segments'])}: {_stability_sentence(r)}")
+    stable = s[s["dt_limit_observed"].isna() & s["dt_limit_predicted"].isna()]
+    if len(stable):
+        top = stable["dt_stable_max"].max()
+        bits.append(f"{'the others' if bits else 'every series'} stable at every step tried (up to {_g(top)} s), "
+                    f"no predicted limit")
+    return "; ".join(bits) + "."
 
 
 def _stability_sentence(r) -> str:
@@ -174,13 +204,13 @@ def _stability_sentence(r) -> str:
         if math.isfinite(pred) and math.isfinite(ok):
             agree = (" (the prediction brackets it)" if ok <= pred * 1.0001 and pred <= obs * 1.0001
                      else " (the prediction misses the observed bracket)")
-        return f"{lo}unstable from {_g(obs)} s; {pred_s}{agree}."
+        return f"{lo}unstable from {_g(obs)} s; {pred_s}{agree}"
     if math.isfinite(ok):
         beyond = ""
         if math.isfinite(pred) and ok > pred:
             beyond = f" (ran stably above the predicted limit: the prediction is conservative)"
-        return f"stable at every step tried (up to {_g(ok)} s); {pred_s}{beyond}."
-    return f"no stable cell; {pred_s}."
+        return f"stable at every step tried (up to {_g(ok)} s); {pred_s}{beyond}"
+    return f"no stable cell; {pred_s}"
 
 
 # ---------------------------------------------------------------------------- plots
@@ -235,12 +265,14 @@ def _failed_band(ax, failed: pd.DataFrame, xcol: str, colours, label_done: set) 
     trans = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
     for _, r in failed.iterrows():
         x = r[xcol]
-        if not (isinstance(x, (int, float)) and math.isfinite(x) and x > 0):
-            continue
         lab = "unstable / failed (no error)" if "failed" not in label_done else None
         label_done.add("failed")
-        ax.plot([x], [0.97], marker="x", color=colours(r["engine"]), ms=8, mew=2, transform=trans, clip_on=False,
-                linestyle="none", label=lab)
+        if isinstance(x, (int, float)) and math.isfinite(x) and x > 0:
+            ax.plot([x], [0.97], marker="x", color=colours(r["engine"]), ms=8, mew=2, transform=trans,
+                    clip_on=False, linestyle="none", label=lab)
+        else:               # no time measured (failed at build or first step): at the left edge
+            ax.plot([0.02], [0.97], marker="x", color=colours(r["engine"]), ms=8, mew=2, transform=ax.transAxes,
+                    clip_on=False, linestyle="none", label=lab)
 
 
 def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) -> list[Path]:
