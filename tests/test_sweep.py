@@ -299,3 +299,61 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
             assert len(again) == 1 and again["integrator"].iloc[0] == c["integrator"]
             reruns[setting] = float(again["score"].iloc[0])
         assert reruns[setting] < c["under"], (setting, reruns[setting], c["under"])
+
+
+@requires_mujoco
+@pytest.mark.slow
+def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_path):
+    """Issue 13 bar: SIGKILL the whole sweep (parent and engine processes) after some cells, rerun the
+    same command: every cell of the grid is in the results exactly once, the finished ones were not
+    run again."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "sw"
+    cmd = [sys.executable, "-m", "impactval.cli", "sweep", "plate_steel", "--engines", "mujoco", "--dt",
+           "4e-6:1e-7:8", "--integrator", "Euler,implicitfast,RK4", "--out", str(out), "--no-plot"]
+    n_cells = 24
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        done = 0
+        while time.monotonic() < deadline and proc.poll() is None:
+            done = _finished_cells(out)
+            if done >= 6:
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None and 6 <= done < n_cells, f"sweep ended or stalled ({done} cells)"
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+    first = _finished_keys(out)
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-2000:]
+    rows = pd.read_csv(out / "results.csv")
+    grid = rows[rows["scene"] == "plate_steel"]
+    assert len(grid) == n_cells and grid["job_key"].is_unique
+    assert first <= set(grid["job_key"])
+    ran_again = [ln for ln in again.stderr.splitlines() if ln.strip().startswith("[")]
+    assert len(ran_again) == n_cells - len(first), again.stderr[-2000:]
+
+
+def _finished_keys(out: Path) -> set:
+    """job_keys of the cells the sweep in `out` has finished (complete lines only)."""
+    path = out / "results.csv"
+    if not path.exists():
+        return set()
+    try:
+        return set(pd.read_csv(path, usecols=["job_key"])["job_key"].dropna())
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
+        return set()
+
+
+def _finished_cells(out: Path) -> int:
+    return len(_finished_keys(out))
