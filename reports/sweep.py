@@ -50,7 +50,8 @@ def _table(header: list[str], rows: list[list[str]], right_from: int = 99) -> li
 
 
 def _setting(r) -> str:
-    return f"{r['integrator']}, dt = {_g(r['dt'])} s, N = {_n(r['segments'])}"
+    seg = str(r["segments"] if r["segments"] == r["segments"] else "").removesuffix(".0")
+    return f"{r['integrator']}, dt = {_g(r['dt'])} s" + (f", N = {seg}" if seg else "")
 
 
 # ---------------------------------------------------------------------------- sweep.md
@@ -78,8 +79,10 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
            f"{int((~st.isin(['ok', 'unstable', 'skipped', 'not-installed'])).sum())} failed otherwise, "
            f"{int(st.isin(['skipped', 'not-installed']).sum())} skipped. "
            f"Error = largest |relative error| of t_m, f_m, delta_m against the reference"
-           f"{f' (tol {tol:g})' if tol else ''}; cost = stepping wall time (build excluded), measured on this "
-           f"machine while it did other work: compare times within one sweep, not across machines.", ""]
+           f"{f' (tol {tol:g})' if tol else ''}; cost = stepping wall time (build excluded) as steps x the median "
+           f"time per step of the same engine, integrator and N in this sweep (one cell's timing is noisy on a "
+           f"shared machine; the measured time of each cell is in the last table): compare costs within one "
+           f"sweep, not across machines.", ""]
     out += ["## In a minute", ""]
     for (scene, engine), g in d.groupby(["scene", "engine"], sort=False):
         out.append(f"### {scene} / {engine}")
@@ -87,7 +90,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
         for _, c in cheap[(cheap["scene"] == scene) & (cheap["engine"] == engine)].iterrows():
             if c["found"]:
                 out.append(f"- **Cheapest under {_pct(c['under'])} %**: {_setting(c)}: {_ms(c['cost_s'])} ms "
-                           f"stepping, largest error {_pct(c['score'])} %.")
+                           f"of stepping, largest error {_pct(c['score'])} %.")
             else:
                 out.append(f"- **Under {_pct(c['under'])} %: none in this grid** (best reached "
                            f"{_pct(c['best_score'])} % with {_setting(c)}).")
@@ -112,7 +115,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     if plots:
         out += ["## Plots", ""] + [f"![{p.stem}]({p.name})" for p in plots] + [""]
     out += ["## Cheapest setting under each tolerance", ""]
-    out += _table(["scene", "engine", "under %", "setting", "stepping ms", "largest error %", "best in grid %"],
+    out += _table(["scene", "engine", "under %", "setting", "cost ms", "largest error %", "best in grid %"],
                   [[c["scene"], c["engine"], _pct(c["under"]), _setting(c) if c["found"] else "none in this grid",
                     _ms(c["cost_s"]) if c["found"] else "", _pct(c["score"]), _pct(c["best_score"])]
                    for _, c in cheap.iterrows()], right_from=4)
@@ -140,7 +143,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                    for _, r in stab.iterrows()])
     out += ["", "## Pareto front (no other cell is both cheaper and more accurate)", ""]
     front = d[d["on_front"]].sort_values(["scene", "engine", "cost_s"])
-    out += _table(["scene", "engine", "setting", "stepping ms", "largest error %"],
+    out += _table(["scene", "engine", "setting", "cost ms", "largest error %"],
                   [[r["scene"], r["engine"], _setting(r), _ms(r["cost_s"]), _pct(r["score"])]
                    for _, r in front.iterrows()], right_from=3)
     out += ["", "## All cells", ""]
@@ -149,11 +152,11 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                               ascending=[True, True, True, True, False]).iterrows():
         rows.append([r["scene"], r["engine"], r["integrator"], _n(r["segments"]), _g(r["dt"]), str(r["status"]),
                      _pct(r["err_t_m"], 4), _pct(r["err_f_m"], 4), _pct(r["err_delta_m"], 4), _pct(r["score"], 4),
-                     _ms(r["cost_s"]), _g(r["n_steps"], "{:.0f}"), _g(r.get("steps_per_s"), "{:.3g}"),
+                     _ms(r["cost_s"]), _ms(r["step_time_s"]), _g(r["n_steps"], "{:.0f}"), _g(r.get("steps_per_s"), "{:.3g}"),
                      _pct(r.get("model_error")), _g(r.get("dt_limit")), "*" if r["on_front"] else "",
                      "" if str(r["status"]) == "ok" else str(r["message"])[:120]])
     out += _table(["scene", "engine", "integrator", "N", "dt [s]", "status", "t_m %", "f_m %", "delta_m %",
-                   "largest %", "stepping ms", "steps", "steps/s", "model error %", "dt limit [s]", "front",
+                   "largest %", "cost ms", "measured ms", "steps", "steps/s", "model error %", "dt limit [s]", "front",
                    "message"], rows)
     return "\n".join(out) + "\n"
 
@@ -208,7 +211,7 @@ def _stability_sentence(r) -> str:
     if math.isfinite(ok):
         beyond = ""
         if math.isfinite(pred) and ok > pred:
-            beyond = f" (ran stably above the predicted limit: the prediction is conservative)"
+            beyond = " (ran stably above the predicted limit: the prediction is conservative)"
         return f"stable at every step tried (up to {_g(ok)} s); {pred_s}{beyond}"
     return f"no stable cell; {pred_s}"
 
@@ -309,7 +312,7 @@ def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) 
                         xytext=(3, 0), textcoords="offset points", va="center", fontsize=8, color="0.25")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        _log_axes(ax, "stepping wall time [s]", "largest |error| [%]")
+        _log_axes(ax, "cost: stepping wall time [s]", "largest |error| [%]")
         ax.set_title(f"{scene}: error vs cost (front circled)", fontsize=10)
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
     fig.tight_layout()
