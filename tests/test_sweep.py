@@ -357,3 +357,29 @@ def _finished_keys(out: Path) -> set:
 
 def _finished_cells(out: Path) -> int:
     return len(_finished_keys(out))
+
+
+def _series(scene="s", engine="mujoco", contact="hertz", segments="41", errs=(), dts=(), **extra):
+    return [dict(scene=scene, engine=engine, contact=contact, integrator="Euler", segments=segments, dt=dt,
+                 status="ok", err_t_m=e, err_f_m=-e, err_delta_m=e / 2, wall_time_step_s=1e-3 / dt * 1e-6,
+                 n_steps=int(1e-4 / dt), t_m=1 + e, f_m=1 - e, delta_m=1 + e / 2, ref_t_m=1.0, ref_f_m=1.0,
+                 ref_delta_m=1.0, **extra) for dt, e in zip(dts, errs)]
+
+
+def test_floor_causes_in_words():
+    dts = [2e-6, 1e-6, 5e-7, 2.5e-7, 1.25e-7]
+    falling = [4e-3, 1e-3, 2.5e-4, 6.25e-5, 1.6e-5]
+    rows = (_series(segments="21", errs=[0.103 + e for e in falling], dts=dts)
+            + _series(segments="41", errs=[0.0278 + e for e in falling], dts=dts)
+            + _series(scene="p", errs=falling, dts=dts)
+            + _series(scene="r", errs=[2e-9] * len(dts), dts=dts, ref_uncertainty=1e-9)
+            + _series(scene="n", contact="native", errs=[0.05 + e for e in falling], dts=dts,
+                      lin_err_t_m=1e-4, lin_err_f_m=-1e-4, lin_err_delta_m=1e-4))
+    f = sw.floors(pd.DataFrame(rows), {"s": "beam", "p": "rigid-plate", "r": "rigid-plate", "n": "rigid-plate"})
+    by = {(r["scene"], r["segments"]): r for _, r in f.iterrows()}
+    assert by[("s", "41")]["reached"] and by[("s", "41")]["cause_kind"] == "structure discretisation"
+    assert "N = 21" in by[("s", "41")]["cause"]
+    assert by[("s", "41")]["dt_floor"] == 1e-6         # 1e-6 is within 10 % of the finest, 2e-6 is not
+    assert not by[("p", "41")]["reached"] and by[("p", "41")]["cause_kind"] == "no floor"
+    assert by[("r", "41")]["cause_kind"] == "reference"
+    assert by[("n", "41")]["cause_kind"] == "contact law"
