@@ -52,6 +52,9 @@ def main() -> None:
     """impactval: validation suite for physics engines on elastic impact (SI units)."""
 
 
+main.add_command(__import__("impactval.cli_sweep").cli_sweep.sweep_command)   # impactval sweep (issue 13)
+
+
 @main.command()
 @click.option("--tag", default=None, help="Only scenes carrying this tag.")
 def scenes(tag: str | None) -> None:
@@ -304,8 +307,6 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     if any_failed(df) or regressed:
         sys.exit(1)
 
-
-main.add_command(__import__("impactval.cli_sweep").cli_sweep.sweep_command)   # impactval sweep (issue 13)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
