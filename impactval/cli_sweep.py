@@ -6,6 +6,7 @@ plots (reports/sweep.py). Exit 0, or 2 on bad input. Failed cells are rows, not 
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
@@ -51,18 +52,23 @@ def parse_unders(text: str | None) -> list[float]:
 @click.option("--tol", default=1e-9, show_default=True, type=float,
               help="Relative tolerance of the reference (tight, so it never sets the floor).")
 @click.option("--timeout", default=600.0, show_default=True, type=float, help="Time limit per cell [s].")
-@click.option("--workers", default=1, show_default=True, type=click.IntRange(min=1),
-              help="Cells run at the same time (each in its own process).")
-@click.option("--restart", is_flag=True, help="Discard DIR/results.csv instead of resuming from it.")
+@click.option("-j", "--jobs", "jobs", default=None, type=click.IntRange(min=1),
+              help="Cells run at once on this machine (each isolated in an engine worker)  [default: number of cores]")
+@click.option("--scheduler", default=None, metavar="ADDR",
+              help="Run the cells on a Dask distributed scheduler (tcp://host:8786); needs impactval[dask].")
+@click.option("--store", "store", default=None, metavar="PATH|URL",
+              help="Result store: an SQLite file or a database URL  [default: OUT/impactval.sqlite]")
+@click.option("--force", is_flag=True, help="Recompute cells already in the store (default: reuse them).")
 @click.option("--out", "out", default="impactval-sweep", show_default=True, type=click.Path(file_okay=False),
               help="Directory for results.csv, orders.csv, cheapest.csv, sweep.md and the plots.")
 @click.option("--no-plot", is_flag=True, help="Skip the plots.")
-def sweep_command(scene, engines, dt, integrator, segments, modes, contact, options, under, tol, timeout, workers,
-                  restart, out, no_plot) -> None:
+def sweep_command(scene, engines, dt, integrator, segments, modes, contact, options, under, tol, timeout, jobs,
+                  scheduler, store, force, out, no_plot) -> None:
     """Run SCENE(s) over a grid of settings and find the cheapest setting under each tolerance.
 
-    The grid is dt x integrator x segments x modes per engine. A killed sweep restarts where it
-    stopped (cells already in DIR/results.csv are not run again). Writes DIR/sweep.md (read it in
+    The grid is dt x integrator x segments x modes per engine. Every cell goes into the result
+    store as it finishes; rerunning a killed or interrupted sweep runs only the missing cells. Exit 0;
+    2 bad input; 130 / 143 interrupted (what finished is stored and reported). Writes DIR/sweep.md (read it in
     a minute), DIR/orders.csv, DIR/cheapest.csv and error-vs-cost and error-vs-dt plots.
     """
     import impactval
@@ -85,22 +91,29 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
     except EngineError as err:
         raise ImpactvalError(str(err)) from None
     scenes = [impactval.load_scene(s) for s in scene]
-    jobs = sw.build_jobs(scenes, specs, base, **axes)
+    cells = sw.build_jobs(scenes, specs, base, tol=tol, **axes)
     for spec in specs:           # a misspelt integrator fails here, before any job
-        for job in [j for j in jobs if j.engine == spec][:1]:
+        for job in [j for j in cells if j.spec == spec][:1]:
             _check_settings_somewhere([spec], job.settings)
     _warn_if_compiling()
-    click.echo(f"impactval sweep: {len(jobs)} cells ({len(scenes)} scenes x {len(specs)} engines), "
-               f"{workers} at a time -> {out}", err=True)
+    click.echo(f"impactval sweep: {len(cells)} cells ({len(scenes)} scenes x {len(specs)} engines) -> {out}", err=True)
+    import shlex
 
-    def progress(row, k, n):
-        score = sw.largest_error(__import__("pandas").DataFrame([row])).iloc[0]
-        err = f"{100 * score:.4g} %" if score == score else str(row["status"])
-        click.echo(f"  [{k}/{n}] {row['scene']} / {row['engine']} {row['integrator'] or ''} N={row['segments'] or '-'} "
-                   f"dt={row['dt']:g}: {err}", err=True)
+    from impactval.progress import make_progress
+    from impactval.runner import RunInterrupted
 
-    df = sw.run_sweep(jobs, out=out, tol=tol, workers=workers, on_row=progress, resume=not restart)
-    write_outputs(df, out, unders, {s.name: s.target.kind for s in scenes}, plot=not no_plot, tol=tol)
+    kinds = {s.name: s.target.kind for s in scenes}
+    command = "impactval " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    try:
+        df = sw.run_sweep(cells, out=out, store=store, workers=jobs, scheduler=scheduler, force=force,
+                          progress=make_progress("auto"), command=command)
+    except RunInterrupted as stop:
+        if len(stop.rows):
+            write_outputs(sw.reference_columns(stop.rows, scenes, tol), out, unders, kinds, plot=not no_plot, tol=tol)
+        click.echo(f"impactval: {stop}; rerun the same command to run the rest; report of what finished: "
+                   f"{Path(out) / 'sweep.md'}", err=True)
+        sys.exit(stop.exit_code)
+    write_outputs(df, out, unders, kinds, plot=not no_plot, tol=tol)
     cheap = sw.cheapest(df, unders)
     for _, c in cheap.iterrows():
         if c["found"]:

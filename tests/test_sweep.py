@@ -151,8 +151,8 @@ def _grid(scenes, engines, dt, integrator=None, segments=None, tol=1e-10):
 
     jobs = sw.build_jobs(scenes, engines, EngineSettings(), dt=sw.parse_axis(dt, "dt", "float", engines),
                          integrator=sw.parse_axis(integrator, "integrator", "str", engines),
-                         segments=sw.parse_axis(segments, "segments", "int", engines))
-    return sw.run_sweep(jobs, tol=tol, isolate=False)
+                         segments=sw.parse_axis(segments, "segments", "int", engines), tol=tol)
+    return sw.run_sweep(jobs, workers=1)
 
 
 @requires_mujoco
@@ -267,9 +267,9 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
     out = tmp_path / "sw"
     res = _cli(["sweep", "beam_ss_midspan", UNSEEN, "--engines", "mujoco,pybullet", "--dt", "2e-6,5e-7,1.25e-7",
                 "--integrator", "mujoco.Euler,mujoco.RK4", "--segments", "21,41", "--under", "5%,2%,0.5%",
-                "--workers", "2", "--out", str(out), "--no-plot"])
+                "-j", "2", "--out", str(out), "--no-plot"])
     assert res.exit_code == 0, res.output
-    rows = sw.with_score(pd.read_csv(out / "results.csv"))
+    rows = sw.with_score(pd.read_csv(out / "results.csv"))       # exported in %: read back as fractions
     assert len(rows) == 2 * (12 + 6)
     cheap = pd.read_csv(out / "cheapest.csv", dtype={"segments": str})
     assert len(cheap) == 2 * 2 * 3
@@ -304,59 +304,57 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
 @requires_mujoco
 @pytest.mark.slow
 def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_path):
-    """Issue 13 bar: SIGKILL the whole sweep (parent and engine processes) after some cells, rerun the
-    same command: every cell of the grid is in the results exactly once, the finished ones were not
-    run again."""
+    """Issue 13 bar: SIGKILL the whole sweep (parent and engine workers) after some cells, rerun the
+    same command: every cell of the grid is stored exactly once, the finished ones were reused (not
+    run again) and only the rest ran."""
     import os
     import signal
+    import sqlite3
     import subprocess
     import sys
     import time
 
     out = tmp_path / "sw"
     cmd = [sys.executable, "-m", "impactval.cli", "sweep", "plate_steel", "--engines", "mujoco", "--dt",
-           "4e-6:1e-7:8", "--integrator", "Euler,implicitfast,RK4", "--out", str(out), "--no-plot"]
+           "4e-6:1e-7:8", "--integrator", "Euler,implicitfast,RK4", "-j", "1", "--out", str(out), "--no-plot"]
     n_cells = 24
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    db = out / "impactval.sqlite"
+
+    def stored() -> int:
+        if not db.exists():
+            return 0
+        try:
+            with sqlite3.connect(db, timeout=5) as con:
+                return con.execute("select count(*) from jobs").fetchone()[0]
+        except sqlite3.OperationalError:       # the table is not created yet
+            return 0
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 300
         done = 0
         while time.monotonic() < deadline and proc.poll() is None:
-            done = _finished_cells(out)
+            done = stored()
             if done >= 6:
                 break
-            time.sleep(0.2)
+            time.sleep(0.1)
         assert proc.poll() is None and 6 <= done < n_cells, f"sweep ended or stalled ({done} cells)"
         os.killpg(proc.pid, signal.SIGKILL)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(30)
-    first = _finished_keys(out)
+    first = stored()
+    assert first < n_cells
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr[-2000:]
+    assert f"{first} of {n_cells} jobs reused" in again.stderr
+    ran_again = [ln for ln in again.stderr.splitlines() if ln.startswith("[")]
+    assert len(ran_again) == n_cells - first, again.stderr[-2000:]
+    with sqlite3.connect(db) as con:
+        assert con.execute("select count(*), count(distinct job_key) from jobs").fetchone() == (n_cells, n_cells)
     rows = pd.read_csv(out / "results.csv")
-    grid = rows[rows["scene"] == "plate_steel"]
-    assert len(grid) == n_cells and grid["job_key"].is_unique
-    assert first <= set(grid["job_key"])
-    ran_again = [ln for ln in again.stderr.splitlines() if ln.strip().startswith("[")]
-    assert len(ran_again) == n_cells - len(first), again.stderr[-2000:]
-
-
-def _finished_keys(out: Path) -> set:
-    """job_keys of the cells the sweep in `out` has finished (complete lines only)."""
-    path = out / "results.csv"
-    if not path.exists():
-        return set()
-    try:
-        return set(pd.read_csv(path, usecols=["job_key"])["job_key"].dropna())
-    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
-        return set()
-
-
-def _finished_cells(out: Path) -> int:
-    return len(_finished_keys(out))
+    assert len(rows) == n_cells and rows["job_key"].is_unique
 
 
 def _series(scene="s", engine="mujoco", contact="hertz", segments="41", errs=(), dts=(), **extra):
