@@ -106,6 +106,9 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
             sizes = ", ".join((f"N = {r['segments']}: " if r["segments"] else "") +
                               f"{_pct(r['floor'])} % from dt <= {_g(r['dt_floor'])} s" for _, r in fg.iterrows())
             detail = fg["cause"].iloc[0] if len(fg) == 1 else _FLOOR_WORDS.get(kind, fg["cause"].iloc[0])
+            if len(fg) > 1 and fg["cause"].str.contains("own model-error estimate").all():
+                detail = ("structure discretisation: each floor matches the engine's own model-error estimate "
+                          "for its N (Floors table)")
             out.append(f"- **Floor**, {integ} ({sizes}): {detail}.")
         s = stab[(stab["scene"] == scene) & (stab["engine"] == engine)]
         out.append(f"- **Stability**: {_stability_summary(s)}")
@@ -133,7 +136,7 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                    for _, r in orders.iterrows()])
     out += ["", "## Floors (where refining dt stops helping)", ""]
     out += _table(["scene", "engine", "integrator", "N", "floor %", "from dt [s]", "reached", "cause"],
-                  [[r["scene"], r["engine"], r["integrator"], _n(r["segments"]), _pct(r["floor"]), _g(r["dt_floor"]),
+                  [[r["scene"], r["engine"], r["integrator"], r["segments"], _pct(r["floor"]), _g(r["dt_floor"]),
                     "yes" if r["reached"] else "no", r["cause"]] for _, r in floors.iterrows()])
     out += ["", "## Stability limits (observed in the grid vs predicted by the engine model)", ""]
     out += _table(["scene", "engine", "integrator", "N", "largest stable dt [s]", "smallest unstable dt [s]",
@@ -184,17 +187,33 @@ def _orders_sentence(og: pd.DataFrame, why: list[str]) -> str:
     return "; ".join(parts) + "."
 
 
+def _series_name(r) -> str:
+    seg = str(r["segments"]).removesuffix(".0") if r["segments"] == r["segments"] else ""
+    return f"{r['integrator']}" + (f" N = {seg}" if seg else "")
+
+
 def _stability_summary(s: pd.DataFrame) -> str:
-    """One line: where each series went unstable, and the predicted limits."""
+    """One line: each series that went unstable (with the predicted limit and whether it brackets
+    the observation), then the rest in one phrase, flagging predictions the grid contradicts."""
     bits = []
-    for _, r in s.iterrows():
-        if math.isfinite(r["dt_limit_observed"]) or math.isfinite(r["dt_limit_predicted"]):
-            bits.append(f"{r['integrator']} N = {_n(r['segments'])}: {_stability_sentence(r)}")
-    stable = s[s["dt_limit_observed"].isna() & s["dt_limit_predicted"].isna()]
-    if len(stable):
-        top = stable["dt_stable_max"].max()
-        bits.append(f"{'the others' if bits else 'every series'} stable at every step tried (up to {_g(top)} s), "
-                    f"no predicted limit")
+    for _, r in s[s["dt_limit_observed"].notna()].iterrows():
+        bits.append(f"{_series_name(r)}: {_stability_sentence(r)}")
+    rest = s[s["dt_limit_observed"].isna()]
+    if len(rest):
+        top = rest["dt_stable_max"].max()
+        pred = rest["dt_limit_predicted"]
+        phrase = f"{'the others' if bits else 'every series'} stable at every step tried (up to {_g(top)} s)"
+        if pred.notna().any():
+            low = rest[pred < rest["dt_stable_max"]]
+            one = _g(pred.min()) == _g(pred.max())
+            span = _g(pred.min()) if one else f"{_g(pred.min())} to {_g(pred.max())}"
+            phrase += f"; predicted limit{'' if one else 's'} {span} s"
+            if len(low):
+                phrase += (" (" + ", ".join(_series_name(r) for _, r in low.iterrows()) +
+                           " ran stably above its predicted limit: conservative there)")
+        else:
+            phrase += "; no predicted limits"
+        bits.append(phrase)
     return "; ".join(bits) + "."
 
 
