@@ -49,6 +49,11 @@ def _table(header: list[str], rows: list[list[str]], right_from: int = 99) -> li
     return out
 
 
+def _label(integrator: str, segments) -> str:
+    seg = str(segments).removesuffix(".0") if segments == segments and segments not in (None, "") else ""
+    return f"{integrator} N={seg}" if seg else str(integrator)
+
+
 def _setting(r) -> str:
     seg = str(r["segments"] if r["segments"] == r["segments"] else "").removesuffix(".0")
     return f"{r['integrator']}, dt = {_g(r['dt'])} s" + (f", N = {seg}" if seg else "")
@@ -144,7 +149,8 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                   [[r["scene"], r["engine"], r["integrator"], _n(r["segments"]), _g(r["dt_stable_max"]),
                     _g(r["dt_limit_observed"]) or "none", _g(r["dt_limit_predicted"]) or "n/a", str(r["n_failed"])]
                    for _, r in stab.iterrows()])
-    out += ["", "## Pareto front (no other cell is both cheaper and more accurate)", ""]
+    out += ["", f"## Pareto front (each cell more than {100 * sw.FRONT_GAIN:g} % more accurate than every cheaper one)",
+            ""]
     front = d[d["on_front"]].sort_values(["scene", "engine", "cost_s"])
     out += _table(["scene", "engine", "setting", "cost ms", "largest error %"],
                   [[r["scene"], r["engine"], _setting(r), _ms(r["cost_s"]), _pct(r["score"])]
@@ -365,7 +371,7 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
         for (integ, seg), h in g[g["score"] > 0].groupby(["integrator", "segments"], sort=False):
             h = h.sort_values("dt")
             ax.plot(h["dt"], 100 * h["score"], color=colour, marker=marks[(engine, integ)],
-                    ls=lines[(engine, seg)], lw=1.4, ms=5, label=f"{integ} N={_n(seg)}: largest error")
+                    ls=lines[(engine, seg)], lw=1.4, ms=5, label=f"{_label(integ, seg)}: largest error")
         o = orders[(orders["scene"] == scene) & (orders["engine"] == engine) & orders["order"].notna()]
         for (integ, seg), og in o.groupby(["integrator", "segments"], sort=False):
             best = og.sort_values(["clean", "scatter"], ascending=[False, True]).iloc[0]
@@ -386,7 +392,7 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
             if len(span):
                 line = 100 * fit.at(span) / abs(ref[0])
                 ax.plot(span, line, color="black", lw=0.9, ls=lines[(engine, seg)], alpha=0.8,
-                        label=f"{integ} N={_n(seg)}: dt-error of {best['metric']}, slope {best['order']:.2f}"
+                        label=f"{_label(integ, seg)}: dt-error of {best['metric']}, slope {best['order']:.2f}"
                               f"{'' if best['clean'] else ' (envelope)'}")
         failed = g[g["score"].isna() & ~g["status"].astype(str).isin(["skipped", "not-installed"])]
         _failed_band(ax, failed, "dt", engine_colour, done)

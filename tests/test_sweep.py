@@ -106,13 +106,18 @@ def _fake_rows(n=40, seed=3):
 
 def test_front_and_cheapest_match_brute_force():
     df = _fake_rows()
-    d = sw.pareto_front(df)
-    for (_, engine), g in d.groupby(["scene", "engine"]):
+    strict = sw.pareto_front(df, gain=0.0)
+    for (_, engine), g in strict.groupby(["scene", "engine"]):
         ok = g[g["status"] == "ok"]
         for _, r in ok.iterrows():
             dominated = ((ok["cost_s"] <= r["cost_s"]) & (ok["score"] < r["score"])).any() or \
                 ((ok["cost_s"] < r["cost_s"]) & (ok["score"] <= r["score"])).any()
             assert r["on_front"] == (not dominated)
+    d = sw.pareto_front(df)               # with the 1 % gain: a subset of the strict front
+    assert (strict["on_front"] | ~d["on_front"]).all() and d["on_front"].sum() >= 2
+    for (_, engine), g in d.groupby(["scene", "engine"]):
+        front = g[g["on_front"]].sort_values("cost_s")
+        assert (front["score"].to_numpy()[1:] < 0.99 * front["score"].to_numpy()[:-1]).all()
     unders = [1e-4, 1e-2, 0.05, 1e-9]
     cheap = sw.cheapest(df, unders)
     assert len(cheap) == 2 * len(unders)
