@@ -113,7 +113,12 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
         click.echo(f"impactval: {stop}; rerun the same command to run the rest; report of what finished: "
                    f"{Path(out) / 'sweep.md'}", err=True)
         sys.exit(stop.exit_code)
-    write_outputs(df, out, unders, kinds, plot=not no_plot, tol=tol)
+    try:
+        write_outputs(df, out, unders, kinds, plot=not no_plot, tol=tol)
+    except KeyboardInterrupt:
+        click.echo(f"impactval: interrupted while writing the report; every cell is stored: rerun the same command "
+                   f"to write {Path(out) / 'sweep.md'}", err=True)
+        sys.exit(130)
     cheap = sw.cheapest(df, unders)
     for _, c in cheap.iterrows():
         if c["found"]:

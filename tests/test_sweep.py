@@ -320,8 +320,9 @@ def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_pat
     import time
 
     out = tmp_path / "sw"
+    # fine steps (up to ~14000 per cell) so the cells do not all finish within one poll
     cmd = [sys.executable, "-m", "impactval.cli", "sweep", "plate_steel", "--engines", "mujoco", "--dt",
-           "4e-6:1e-7:8", "--integrator", "Euler,implicitfast,RK4", "-j", "1", "--out", str(out), "--no-plot"]
+           "4e-8:5e-9:8", "--integrator", "Euler,implicitfast,RK4", "-j", "1", "--out", str(out), "--no-plot"]
     n_cells = 24
     db = out / "impactval.sqlite"
 
@@ -386,3 +387,36 @@ def test_floor_causes_in_words():
     assert not by[("p", "41")]["reached"] and by[("p", "41")]["cause_kind"] == "no floor"
     assert by[("r", "41")]["cause_kind"] == "reference"
     assert by[("n", "41")]["cause_kind"] == "contact law"
+
+
+@requires_mujoco
+@pytest.mark.slow
+def test_sweep_interrupted_reports_what_finished(tmp_path):
+    """Ctrl-C: exit 130, the finished cells are stored and sweep.md / cheapest.csv cover them."""
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "sw"
+    cmd = [sys.executable, "-m", "impactval.cli", "sweep", "plate_steel", "--engines", "mujoco", "--dt",
+           "4e-8:5e-9:8", "--integrator", "Euler,RK4", "-j", "1", "--out", str(out), "--no-plot"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    n = 0
+    while time.monotonic() < deadline and proc.poll() is None and n < 3:
+        try:
+            with sqlite3.connect(out / "impactval.sqlite", timeout=5) as con:
+                n = con.execute("select count(*) from jobs").fetchone()[0]
+        except sqlite3.OperationalError:
+            n = 0
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, err[-2000:]
+    assert "rerun the same command" in err
+    report = (out / "sweep.md").read_text()
+    rows = pd.read_csv(out / "results.csv")
+    assert 3 <= len(rows) < 16 and f"{len(rows)} cells" in report
+    assert len(pd.read_csv(out / "cheapest.csv")) == 1
