@@ -488,9 +488,12 @@ def fit_orders(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> p
                              log_c=fit.log_c if fit else math.nan, scatter=fit.scatter if fit else math.nan,
                              clean=bool(fit and fit.clean),
                              nominal_order=_nominal(engine, integrator)[0],
-                             explanation=explain_order(engine, integrator, metric, order, kind, contact,
-                                                         clean=bool(fit and fit.clean),
-                                                         scatter=fit.scatter if fit else math.nan)))
+                             explanation=(explain_order(engine, integrator, metric, order, kind, contact,
+                                                          clean=bool(fit and fit.clean),
+                                                          scatter=fit.scatter if fit else math.nan)
+                                          if len(g) >= 4 else
+                                          f"{len(g)} stable time step{'s' if len(g) != 1 else ''} in this grid: "
+                                          f"an order needs at least 4 (a clean one {ORDER_MIN_POINTS})")))
     return pd.DataFrame(rows, columns=[*SERIES, "metric", "order", "dt_min", "dt_max", "n_points", "log_c", "scatter",
                                        "clean", "nominal_order", "explanation"])
 

@@ -420,3 +420,9 @@ def test_sweep_interrupted_reports_what_finished(tmp_path):
     rows = pd.read_csv(out / "results.csv")
     assert 3 <= len(rows) < 16 and f"{len(rows)} cells" in report
     assert len(pd.read_csv(out / "cheapest.csv")) == 1
+
+
+def test_too_few_steps_for_an_order_says_so():
+    rows = _series(errs=[1e-3, 2.5e-4, 6e-5], dts=[1e-6, 5e-7, 2.5e-7])
+    o = sw.fit_orders(pd.DataFrame(rows))
+    assert o["order"].isna().all() and o["explanation"].str.contains("3 stable time steps").all()
