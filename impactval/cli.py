@@ -53,6 +53,7 @@ def main() -> None:
 
 
 main.add_command(__import__("impactval.cli_engines", fromlist=["engines_command"]).engines_command)
+main.add_command(__import__("impactval.cli_sweep").cli_sweep.sweep_command)   # impactval sweep (issue 13)
 
 
 @main.command()
