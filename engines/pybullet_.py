@@ -27,7 +27,10 @@ frame (a one-step lag in the contact point: +0.3 % in f_m at N = 51); createMult
 keeps at most 127 links; a JOINT_POINT2POINT pivot is given in the link's inertial frame; the
 link inertia diagonal must be strictly inside the triangle inequality (i_x + i_y > i_z): Bullet's
 mass-matrix check fails on the boundary depending on rounding (issue 11: ~1 in 5 beam geometries
-crashed with [i_x, i_y, i_x + i_y]), so i_z = (1 - INERTIA_MARGIN)(i_x + i_y).
+crashed with [i_x, i_y, i_x + i_y]), so i_z = (1 - INERTIA_MARGIN)(i_x + i_y); Bullet clamps every joint rate of a multibody to 100 rad/s
+by default (btMultiBody maxCoordinateVelocity): a steel ball at 10 m/s on a titanium beam turns the
+hinges near it faster than that and the clamp made the energy grow 936 % at any dt, so the chain gets
+maxJointVelocity = MAX_JOINT_VELOCITY.
 The penetration is measured from body positions before each step (Bullet's contactDistance is
 the pre-step value too), and the force of the step is paired with it: `contact(model)` and
 `energy(model)` report the sample at the start of the last step.
@@ -83,6 +86,8 @@ MAX_LINKS = 127
 MAX_SIZED_LINKS = 115
 #: the third principal moment sits this far inside the triangle inequality (see the module docstring)
 INERTIA_MARGIN = 1e-6
+#: joint-rate clamp [rad/s] of the chain (Bullet's default 100 rad/s broke fast impacts, see the docstring)
+MAX_JOINT_VELOCITY = 1e9
 
 
 @dataclass(frozen=True)
@@ -377,6 +382,7 @@ def _build_chain(c: _Client, beam, hc: HenckyChain):
     for j in revolute:
         c.changeDynamics(body, j, mass=m_bar, localInertiaDiagonal=inertia)
     _no_losses(c, body, [-1] + all_joints)
+    c.changeDynamics(body, -1, maxJointVelocity=MAX_JOINT_VELOCITY)
     c.setJointMotorControlArray(body, all_joints, p.VELOCITY_CONTROL, forces=[0.0] * nl)
 
     # Hencky springs over the revolute coordinates q (relative angles; bar k's angle = sum q_0..k)
