@@ -435,6 +435,7 @@ class MujocoAdapter(SteppingAdapter):
         f0 = alpha * delta**1.5 if (settings.contact == "hertz" and delta > 0) else 0.0
         e0 = float(data.energy[0]) + float(data.energy[1]) + (potential(delta) if delta > 0 else 0.0)
         run.sample = (delta, f0, 0.0, xs, scene.ball.velocity, e0)
+        run.v_prev[:] = data.qvel           # the velocity the first step starts from
         if chain is not None:
             info["segments"] = chain.n
         return run
@@ -449,12 +450,16 @@ class MujocoAdapter(SteppingAdapter):
 
     # ------------------------------------------------------------------ stepping
     def step(self, run: _Run) -> None:
-        """One mj_step. mj_step computes the forward dynamics of the state at its start, then integrates:
-        after it, positions-derived data (site_xpos, energy, contact forces, qM) describe the state at the
-        start of the step, so the adapter samples that state (sample_lag = 1) and needs no extra mj_forward."""
+        """One mj_step, nothing else (timed). mj_step computes the forward dynamics of the state at its start,
+        then integrates: after it, positions-derived data (site_xpos, energy, contact forces, qM) describe the
+        state at the start of the step, so the adapter samples that state (sample_lag = 1) in `observe` and
+        needs no extra mj_forward."""
+        run.mj.mj_step(run.model, run.data)
+
+    def observe(self, run: _Run) -> None:
+        """The sample of the last step (not timed): warnings, delta, force, energy; then keep the velocity
+        the next step starts from (`v_prev`)."""
         mj, m, d = run.mj, run.model, run.data
-        run.v_prev[:] = d.qvel
-        mj.mj_step(m, d)
         run.n_steps += 1
         if d.warning[mj.mjtWarning.mjWARN_BADQACC].number > 0:
             raise EngineDiverged(f"MuJoCo reported NaN/huge accelerations after {run.n_steps} steps "
@@ -484,6 +489,7 @@ class MujocoAdapter(SteppingAdapter):
             f = run.probe.native_force(d)
         z_tip = float(d.site_xpos[run.probe.tip, 2])
         run.sample = (delta, f, run.z_tip0 - z_tip, xs, -float(run.v_prev[run.probe.ball_dof]), pe + ke)
+        run.v_prev[:] = d.qvel
 
     def contact(self, run: _Run) -> tuple[float, float]:
         return run.sample[0], run.sample[1]

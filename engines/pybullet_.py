@@ -1,7 +1,8 @@
 """PyBullet adapter: the ball on a rigid plate or on a chain beam, in PyBullet 3.2 (DIRECT mode).
 
 A stepping adapter (engines/base.py): `build` makes the scene, `step` applies the spring torques and
-contact forces from the current state and calls `stepSimulation`; the base owns the loop, the window,
+contact forces from the current state and calls `stepSimulation` (timed), `observe` reads the new state
+back and computes the sample and its energy (not timed); the base owns the loop, the window,
 dt = "auto", the stability limit (refused before stepping when dt is above it) and the status.
 
 Scene in Bullet (SI units; z is up, the ball moves down along -z with v0 and touches at t = 0):
@@ -256,6 +257,9 @@ class PybulletAdapter(SteppingAdapter):
     def step(self, run: "_Run") -> None:
         run.step()
 
+    def observe(self, run: "_Run") -> None:
+        run.observe()
+
     def contact(self, run: "_Run") -> tuple[float, float]:
         return run.sample[0], run.sample[1]
 
@@ -458,23 +462,39 @@ class _Run:
         return e
 
     def step(self) -> None:
+        """The physics of one step (timed): read the positions the forces need, apply the spring torques
+        and the contact force, stepSimulation. `observe` then builds the sample."""
         c, p = self.client, self.p
-        d, q_prev = self.d, self.q_all
-        pos, vz, z_point = self.pos, self.vz, self.z_point
+        pos = self.getpos(self.ball_body)[0]
         if self.chain is not None:
-            q = self.q_all[-self.n_rev:]
+            q = np.fromiter((s[0] for s in c.getJointStates(self.body, self.rev)), float, self.n_rev)
+            # computeForwardKinematics: without it getLinkState returns the previous step's frame
+            st = c.getLinkState(self.body, self.link, computeForwardKinematics=1)
+            point = c.multiplyTransforms(st[4], st[5], self.local, [0, 0, 0, 1])[0]
+            z_point = point[2]
             c.setJointMotorControlArray(self.body, self.rev, p.TORQUE_CONTROL, forces=(-(self.k_rev @ q)).tolist())
+        else:
+            z_point, point = self.surface_z, None
+        d = z_point - (pos[2] - self.radius)
         f = 0.0
         if self.mode == "hertz":
             f = self.alpha * d**1.5 if d > 0 else 0.0
             if f > 0:
                 c.applyExternalForce(self.ball_body, -1, [0, 0, f], pos, p.WORLD_FRAME)
                 if self.chain is not None:
-                    c.applyExternalForce(self.body, self.link, [0, 0, -f], self.point, p.WORLD_FRAME)
+                    c.applyExternalForce(self.body, self.link, [0, 0, -f], point, p.WORLD_FRAME)
         elif self.mode == "native-hertz":
             dd = d if d > self.delta_floor else self.delta_floor
             c.setPhysicsEngineParameter(globalCFM=self.erp / (self.alpha * math.sqrt(dd) * self.dt))
         c.stepSimulation()
+        self.stepped = (d, f, pos, z_point)
+
+    def observe(self) -> None:
+        """The sample of the last step (not timed): Bullet's contact force (native modes), the new state, the
+        energy of the step's start."""
+        c = self.client
+        d, f, pos, z_point = self.stepped
+        q_prev, vz = self.q_all, self.vz
         if self.mode != "hertz":
             f = sum(cp[9] for cp in c.getContactPoints(self.ball_body, self.target_body))
             f_mom = self.m0 * (self.getvel(self.ball_body)[0][2] - vz) / self.dt

@@ -287,6 +287,7 @@ def test_joint_rates_are_not_clamped(adapter, fast_titanium):
         e0, rate = run.sample[5], 0.0
         for _ in range(300):
             run.step()
+            run.observe()
             rate = max(rate, float(np.max(np.abs(run.qd_all))))
         assert rate > 100.0                     # the clamp would have capped this at 100 rad/s
         assert abs(run.sample[5] / e0 - 1.0) < 1e-3
