@@ -59,6 +59,7 @@ reported structure frequencies.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -160,7 +161,9 @@ class _Client:
     def __getattr__(self, name):
         fn = getattr(self.p, name)
         cid = self.cid
-        return lambda *a, **kw: fn(*a, physicsClientId=cid, **kw)
+        bound = functools.partial(fn, physicsClientId=cid)
+        setattr(self, name, bound)          # made once: the stepping loop calls these every step
+        return bound
 
     def close(self) -> None:
         try:
