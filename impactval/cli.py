@@ -291,14 +291,13 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     click.echo(text_table(df))
     regressed = False
     if "baseline" in df.attrs:
-        from impactval.history import regressions
+        from impactval.history import flagged_lines, regressions, require_comparable
 
         cmp = df.attrs["baseline"]
-        flagged = cmp[cmp["mark"] != ""]
-        for _, r in flagged.iterrows():
-            click.echo(f"  {r['mark']} {r['scene']} / {r['engine']}: {r['old_status']} -> {r['status']}, "
-                       f"largest error {100 * r['old_score']:.3f} % -> {100 * r['score']:.3f} %")
-        click.echo(f"against {baseline}: {len(flagged)} of {len(cmp)} rows marked")
+        for line in flagged_lines(cmp):
+            click.echo(line)
+        click.echo(f"against {baseline}: {int((cmp['mark'] != '').sum())} of {len(cmp)} rows marked")
+        require_comparable(cmp, df, df.attrs["baseline_rows"], baseline)   # a drifted setup is exit 2, never a pass
         regressed = regressions(cmp)
     click.echo(f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}")
     if any_failed(df) or regressed:
