@@ -304,5 +304,10 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
         sys.exit(1)
 
 
+from impactval import cli_nightly as _cli_nightly  # noqa: E402 - commands in their own module
+main.add_command(_cli_nightly.nightly_command)
+main.add_command(_cli_nightly.report_command)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -239,7 +239,7 @@ def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFra
     """Title and one line per fact: run, date, how it ended, versions, machine, settings."""
     info = dict(info or {})
     out = [f"# {info.pop('title', 'impactval run')}", ""]
-    labels = (("run_id", "run"), ("command", "command"), ("started", "started"), ("finished", "finished"),
+    labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"), ("finished", "finished"),
               ("ended", "how it ended"), ("versions", "versions"), ("machine", "machine"), ("suite", "suite"))
     for key, label in labels:
         v = info.get(key)
