@@ -204,7 +204,7 @@ def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, Thre
                     changed = True
                 change, verdict = checks[m].verdict(a, b)
                 out[f"change_{m}"] = change
-                text = f"{m} {100 * a:+.4g} % -> {100 * b:+.4g} % (|error| {100 * change:+.0f} %)"
+                text = f"{m} {100 * a:+.4g} % -> {100 * b:+.4g} % ({100 * change:+.0f} % in size)"
                 if verdict == "+":
                     worse.append(text)
                 elif verdict == "-":

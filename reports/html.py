@@ -23,7 +23,7 @@ h1{font-size:1.6em;border-bottom:2px solid #333}h2{font-size:1.25em;margin-top:1
 table{border-collapse:collapse;margin:.6em 0;font-size:.86em}th,td{border:1px solid #ccc;padding:2px 7px}
 th{background:#f1f1f1}td.r{text-align:right;font-variant-numeric:tabular-nums}tr:nth-child(even){background:#fafafa}
 code{background:#f3f3f3;padding:0 3px;border-radius:3px}img{max-width:100%;height:auto;border:1px solid #ddd}
-.sw{display:inline-block;width:.8em;height:.8em;border-radius:2px;margin-right:.35em;vertical-align:-1px}
+td.nw{white-space:nowrap}.sw{display:inline-block;width:.8em;height:.8em;border-radius:2px;margin-right:.35em;vertical-align:-1px}
 .m-worse,.m-fail{color:#b00000;font-weight:bold}.m-better,.m-fixed{color:#00713c;font-weight:bold}.m-x{color:#777}
 figure{margin:1em 0}figcaption{font-style:italic;color:#444}
 """
@@ -72,6 +72,7 @@ def _table(lines: list[str]) -> str:
             body = _inline(c)
             if col == "engine" and c:
                 body = f'<span class="sw" style="background:{engine_colour(c)}"></span>{body}'
+                cls = "nw"
             if col == "mark" and c in _MARK_CLASS:
                 body = f'<span class="{_MARK_CLASS[c]}">{body}</span>'
             tds.append(f'<td class="{cls}">{body}</td>' if cls else f"<td>{body}</td>")

@@ -41,7 +41,11 @@ def force_curves_plot(scene: str, reference: tuple[np.ndarray, np.ndarray] | Non
     plt = _pyplot()
     if plt is None or (reference is None and not engines):
         return None
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    diff_panel = reference is not None and bool(engines)
+    if diff_panel:
+        fig, (ax, dax) = plt.subplots(2, 1, figsize=(6.4, 4.8), sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
+    else:
+        fig, ax = plt.subplots(figsize=(6.4, 3.6))
     if reference is not None:
         ax.plot(np.asarray(reference[0]) * 1e6, reference[1], label="reference (Hertz)", **REFERENCE_STYLE)
     if linear is not None:
@@ -52,12 +56,26 @@ def force_curves_plot(scene: str, reference: tuple[np.ndarray, np.ndarray] | Non
         n = seen[engine] = seen.get(engine, -1) + 1
         ax.plot(np.asarray(t) * 1e6, f, color=engine_colour(engine), lw=1.3, ls=_DASHES[n % len(_DASHES)],
                 label=label, alpha=0.9)
+        if diff_panel:
+            # engine minus reference on the reference's grid, in % of the reference peak force
+            t_ref, f_ref = np.asarray(reference[0], float), np.asarray(reference[1], float)
+            peak = float(np.max(f_ref)) if f_ref.size else 0.0
+            if peak > 0:
+                f_on_ref = np.interp(t_ref, np.asarray(t, float), np.asarray(f, float), left=0.0, right=0.0)
+                dax.plot(t_ref * 1e6, 100 * (f_on_ref - f_ref) / peak, color=engine_colour(engine), lw=1.1,
+                         ls=_DASHES[n % len(_DASHES)])
     if reference is not None and len(reference[0]):
         t_ref, f_ref = np.asarray(reference[0]), np.asarray(reference[1])
         end = t_ref[f_ref > 0].max() if (f_ref > 0).any() else t_ref.max()
         ax.set_xlim(0, 1.15 * end * 1e6)
-    ax.set_xlabel("time [us]")
     ax.set_ylabel("contact force [N]")
+    if diff_panel:
+        dax.axhline(0.0, color=REFERENCE_STYLE["color"], lw=0.8)
+        dax.set_ylabel("engine - ref.\n[% of ref. f_m]", fontsize=8)
+        dax.set_xlabel("time [us]")
+        dax.grid(True, alpha=0.3)
+    else:
+        ax.set_xlabel("time [us]")
     ax.set_title(scene, fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="upper right")
@@ -98,7 +116,7 @@ def trend_plot(history: pd.DataFrame, scene: str, path: str | Path) -> Path | No
             ax.plot(g["run_index"], y, marker="o", ms=3, color=engine_colour(engine), ls=_DASHES[n % len(_DASHES)],
                     lw=1.2, label=label)
             bad = g["mark"].isin(["+", "!"]) if "mark" in g else pd.Series(False, index=g.index)
-            if bad.any():
+            if bad.any() and col != "wall_time_step_s":       # marks flag errors; wall time has its own check
                 yb = y[bad]
                 yb = yb.where(yb.notna(), np.nanmin(y) if np.isfinite(y).any() else 0.0)
                 ax.scatter(g.loc[bad, "run_index"], yb, label=None, **REGRESSION_MARKER)

@@ -155,7 +155,7 @@ def summary_section(df: pd.DataFrame, cmp: pd.DataFrame | None = None, trend: pd
         if cmp is not None:
             c = cmp[cmp["engine"] == engine]
             reg = c[c["mark"].isin(["+", "!"])]
-            row.append(", ".join(f"{r['mark']} {r['scene']}: {r['why']}" for _, r in reg.iterrows()) or "none")
+            row.append("; ".join(f"{r['mark']} {r['scene']}: {_short_why(r)}" for _, r in reg.iterrows()) or "none")
             good = c[c["mark"].isin(["*", "-"])]
             row.append(str(len(good)))
         if trend is not None and len(trend):
@@ -199,7 +199,11 @@ def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.
                       "" if not math.isfinite(ch) else f"{100 * ch:+.1f} %"])
     out += ["Largest |error| of t_m, f_m, delta_m per row, in %:", ""]
     out += _md_table(header, cells, [False] * 4 + [True, True, False, True, True, True])
-    if trend is not None and len(trend):
+    if trend is not None and len(trend) and trend["state"].astype(str).str.startswith("not enough history").all():
+        out += ["", "### Stepping wall time over the history", "",
+                f"Not enough history yet: wall-time steps are judged from {2 * _window()} nights on "
+                f"(now at most {int(pd.to_numeric(trend['nights']).max())})."]
+    elif trend is not None and len(trend):
         out += ["", "### Stepping wall time over the history", "",
                 "Wall times are noisy: a row is flagged only when each of the last nights is past the threshold "
                 "against the median of the nights before (a step that persists).", ""]
@@ -210,6 +214,22 @@ def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.
         out += _md_table(["scene", "engine", "contact", "dt [s]", "N", "state", "nights", "before ms", "last ms",
                           "ratio"], tcells, [False] * 6 + [True] * 4)
     return "\n".join(out) + "\n"
+
+
+def _window() -> int:
+    from impactval.history import WALL_WINDOW
+
+    return WALL_WINDOW
+
+
+def _short_why(r) -> str:
+    """The regressed row's worst metric with its numbers (the full reason is in the comparison)."""
+    if r["mark"] != "+":
+        return str(r["why"])
+    parts = [p.strip() for p in str(r["why"]).split(";")]
+    changes = [(abs(_num(r.get(f"change_{p.split()[0]}"))), p) for p in parts if p.split() and
+               math.isfinite(_num(r.get(f"change_{p.split()[0]}")))]
+    return max(changes)[1] if changes else str(r["why"])
 
 
 def reference_section(references: pd.DataFrame) -> list[str]:
@@ -239,7 +259,8 @@ def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFra
     """Title and one line per fact: run, date, how it ended, versions, machine, settings."""
     info = dict(info or {})
     out = [f"# {info.pop('title', 'impactval run')}", ""]
-    labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"), ("finished", "finished"),
+    labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"),
+              ("finished", "finished"),
               ("ended", "how it ended"), ("versions", "versions"), ("machine", "machine"), ("suite", "suite"))
     for key, label in labels:
         v = info.get(key)
