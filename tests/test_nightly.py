@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from chromium import load_page, requires_chromium
-from conftest import requires_exudyn, requires_mujoco
+from conftest import requires_exudyn, requires_mujoco, requires_pybullet as requires_pybullet_installed
 from impactval.engines.base import EngineSettings
 from pg_server import postgres_server, postgres_url  # noqa: F401 - fixtures
 
@@ -179,3 +179,12 @@ def test_sqlite_and_postgresql_give_the_same_comparison(tmp_path, postgres_url):
     for a, b in zip(lite[1:], pg[1:]):
         pd.testing.assert_frame_equal(a.cmp[cols], b.cmp[cols])
         pd.testing.assert_frame_equal(a.rows[ERRORS], b.rows[ERRORS])
+
+
+@requires_pybullet_installed
+def test_nothing_could_run_is_exit_2(tmp_path):
+    """PyBullet has no modal (FFRF) body: every job of this night is skipped, so nothing ran."""
+    r = subprocess.run([sys.executable, "-m", "impactval.cli", "nightly", "modal_two_mode", "--engines", "pybullet",
+                        "--dt", "1e-6", "--out", str(tmp_path)], capture_output=True, text=True)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "impactval: error: nothing could run: every job is not-installed or skipped" in r.stderr
