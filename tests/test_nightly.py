@@ -188,3 +188,26 @@ def test_nothing_could_run_is_exit_2(tmp_path):
                         "--dt", "1e-6", "--out", str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 2, r.stdout + r.stderr
     assert "impactval: error: nothing could run: every job is not-installed or skipped" in r.stderr
+
+
+@requires_mujoco
+def test_run_report_and_run_baseline_follow_the_nightly_rules(tmp_path):
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--dt", "1e-6"]
+    first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr
+    md = (tmp_path / "a" / "report.md").read_text()
+    assert md.index("## Summary") < md.index("## Results") < md.index("## Reference values")
+    assert "closed form (Hertz, paper eq. 31-33)" in md and " contacts |" in md
+    assert "lin t_m" not in md                                  # empty columns left out
+    assert "![plate_steel: contact force" in md and (tmp_path / "a" / "curves_plate_steel.png").is_file()
+    assert (tmp_path / "a" / "report.html").is_file()
+    drift = subprocess.run([*cmd[:-1], "5e-7", "--out", str(tmp_path / "b"), "--baseline",
+                            str(tmp_path / "a" / "results.csv")], capture_output=True, text=True)
+    assert drift.returncode == 2, drift.stdout + drift.stderr
+    assert "nothing comparable with" in drift.stderr and "dt: baseline 1e-06; now 5e-07" in drift.stderr
+    again = subprocess.run([sys.executable, "-m", "impactval.cli", "report", str(tmp_path / "a"), "--run",
+                            first.stdout.split("run ")[-1].split(":")[0][:8], "--out", str(tmp_path / "c")],
+                           capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr
+    redone = (tmp_path / "c" / "report.md").read_text()
+    assert redone[redone.index("## Summary"):] == md[md.index("## Summary"):]
