@@ -65,7 +65,9 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
             if s is not None:
                 curves[_label(r, several)] = thin(*s)
             k = pd.to_numeric(pd.Series([r.get("contact_stiffness")]), errors="coerce").iloc[0]
-            if linear is None and str(r.get("contact_law", "")) == "linear" and math.isfinite(k) and k > 0:
+            law = str(r.get("contact_law", "") or "")
+            is_linear = law == "linear" or (not law and str(r["contact"]) == "native")   # older adapters: no law
+            if linear is None and is_linear and math.isfinite(k) and k > 0:
                 from impactval.reference.linear import solve_linear
 
                 lin = solve_linear(scene, tol=tol, stiffness=float(k))
