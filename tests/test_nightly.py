@@ -173,7 +173,7 @@ def test_report_rerenders_from_the_store_and_the_page_loads(tmp_path):
 @requires_exudyn
 def test_sqlite_and_postgresql_give_the_same_comparison(tmp_path, postgres_url):  # noqa: F811
     lite = three_nights(tmp_path / "h.sqlite", tmp_path / "lite")
-    pg = three_nights(postgres_url, tmp_path / "pg")
+    pg = three_nights(postgres_url.replace("postgresql+psycopg://", "postgresql://"), tmp_path / "pg")   # as a user types it
     assert [o.exit_code for o in lite] == [o.exit_code for o in pg] == [0, 0, 1]
     cols = ["scene", "engine", "mark", "why", "old_err_t_m", *ERRORS, "change_t_m", "change_f_m"]
     for a, b in zip(lite[1:], pg[1:]):
