@@ -211,3 +211,20 @@ def test_run_report_and_run_baseline_follow_the_nightly_rules(tmp_path):
     assert again.returncode == 0, again.stderr
     redone = (tmp_path / "c" / "report.md").read_text()
     assert redone[redone.index("## Summary"):] == md[md.index("## Summary"):]
+
+
+@requires_mujoco
+def test_sigterm_writes_the_partial_report_and_exits_143(tmp_path):
+    db = tmp_path / "h.sqlite"
+    proc = subprocess.Popen([sys.executable, "-m", "impactval.cli", "nightly", "plate_steel", "beam_ss_midspan",
+                             "--engines", "mujoco", "--dt", "5e-7", "-j", "1", "--store", str(db), "--out",
+                             str(tmp_path / "out")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    end = time.monotonic() + 240
+    while _stored_jobs(db) < 1 and time.monotonic() < end and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert "rerun to resume the night" in err
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "interrupted" in md and "plate_steel" in md
