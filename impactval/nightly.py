@@ -73,13 +73,14 @@ def _night_job(job, night: str):
 # ---------------------------------------------------------------------------- the store's nightly side
 def _verdicts(store):
     """The `nightly_verdicts` table (created on first use): run_id, suite, night, exit_code,
-    baseline_run_id, message."""
+    baseline_run_id, message, checks (the thresholds used, as --fail-on texts)."""
     import sqlalchemy as sa
 
     md = sa.MetaData()
     table = sa.Table("nightly_verdicts", md, sa.Column("run_id", sa.String(36), primary_key=True),
                      sa.Column("suite", sa.Text), sa.Column("night", sa.Text), sa.Column("exit_code", sa.Integer),
-                     sa.Column("baseline_run_id", sa.Text), sa.Column("message", sa.Text))
+                     sa.Column("baseline_run_id", sa.Text), sa.Column("message", sa.Text),
+                     sa.Column("checks", sa.Text))
     md.create_all(store.engine, checkfirst=True)
     return table
 
@@ -93,21 +94,23 @@ def nightly_runs(store, suite: str) -> pd.DataFrame:
     runs = store.runs
     prefix = f"{TAG_PREFIX}/{suite}/"
     q = (sa.select(runs.c.id, runs.c.tag, runs.c.status, runs.c.started_at, runs.c.ended_at, v.c.exit_code,
-                   v.c.baseline_run_id, v.c.message)
+                   v.c.baseline_run_id, v.c.message, v.c.checks)
          .select_from(runs.outerjoin(v, v.c.run_id == runs.c.id))
          .where(runs.c.tag.like(prefix.replace("%", r"\%").replace("_", r"\_") + "%", escape="\\"))
          .order_by(runs.c.started_at, runs.c.id))
     with store.engine.connect() as c:
         recs = [dict(r) for r in c.execute(q).mappings()]
     df = pd.DataFrame(recs, columns=["id", "tag", "status", "started_at", "ended_at", "exit_code", "baseline_run_id",
-                                     "message"])
+                                     "message", "checks"])
     df["night"] = df["tag"].str.slice(len(prefix))
     return df
 
 
-def _record_verdict(store, run_id: str, suite: str, night: str, code: int, baseline: str | None, msg: str) -> None:
+def _record_verdict(store, run_id: str, suite: str, night: str, code: int, baseline: str | None, msg: str,
+                    checks: str = "") -> None:
     v = _verdicts(store)
-    values = dict(run_id=run_id, suite=suite, night=night, exit_code=code, baseline_run_id=baseline, message=msg)
+    values = dict(run_id=run_id, suite=suite, night=night, exit_code=code, baseline_run_id=baseline, message=msg,
+                  checks=checks)
     with store.engine.begin() as c:
         c.execute(v.delete().where(v.c.run_id == run_id))
         c.execute(v.insert().values(**values))
@@ -273,7 +276,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
                            f"{len(cmp)} rows compared, {counts['changed']} changed, {counts['-']} better, "
                            f"{counts['*']} fixed)")
         base_id = None if base is None else str(base["id"])
-        _record_verdict(db, run_id, suite, night, code, base_id, message)
+        _record_verdict(db, run_id, suite, night, code, base_id, message, history.check_names(checks))
         verdict_md = (f"\n## Verdict\n\nExit code **{code}**: {message}.\n"
                       + (f"\nResumed night {night}: the jobs that finished before the interruption were reused.\n"
                          if resumed else ""))
@@ -364,19 +367,21 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
             rows = db.rows(run_id=run["id"])
             cmp, base_label = None, None
             base_id = me["baseline_run_id"]
+            checks = history.thresholds(str(me["checks"]).split(", ") if isinstance(me["checks"], str) and me["checks"]
+                                        else ())
             if isinstance(base_id, str) and base_id:
                 base = nruns[nruns["id"] == base_id]
-                cmp = history.compare(rows, db.rows(run_id=base_id))
+                cmp = history.compare(rows, db.rows(run_id=base_id), checks)
                 base_label = f"run `{base_id}`" + (f" of {str(base['started_at'].iloc[0])[:19]}" if len(base) else "")
-            hist = history_rows(db, upto, run["id"])
-            trend = history.wall_time_steps(hist) if len(hist) else history.wall_time_steps(None)
+            hist = history_rows(db, upto, run["id"], checks=checks)
+            trend = history.wall_time_steps(hist, checks["wall_time"].rel) if len(hist) else history.wall_time_steps(None)
             code = me["exit_code"]
             verdict = "" if pd.isna(code) else f"\n## Verdict\n\nExit code **{int(code)}**: {me['message']}.\n"
             info = {"suite": f"{suite}, night {me['night']}"}
             if not pd.isna(code):
                 info["verdict"] = f"exit {int(code)}: {me['message']}"
             paths = write_report(db, run["id"], dest, title=f"impactval nightly ({suite})", rows=rows, cmp=cmp,
-                                 baseline=base_label, history=hist, trend=trend, tol=tol, extra_info=info,
+                                 baseline=base_label, checks=checks, history=hist, trend=trend, tol=tol, extra_info=info,
                                  extra_md=verdict)
         else:
             paths = write_report(db, run["id"], dest, tol=tol)

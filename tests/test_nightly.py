@@ -142,8 +142,8 @@ def test_report_rerenders_from_the_store_and_the_page_loads(tmp_path):
     out = tmp_path / "night"
     cmd = [sys.executable, "-m", "impactval.cli"]
     for _ in range(2):
-        r = subprocess.run(cmd + ["nightly", "plate_steel", "--engines", "mujoco", "--dt", "1e-6", "--out", str(out)],
-                           capture_output=True, text=True)
+        r = subprocess.run(cmd + ["nightly", "plate_steel", "--engines", "mujoco", "--dt", "1e-6", "--out", str(out),
+                                  "--fail-on", "f_m:+15%"], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
     original = (out / "report.md").read_text()
     listing = subprocess.run(cmd + ["report", str(out), "--list"], capture_output=True, text=True)
@@ -156,9 +156,9 @@ def test_report_rerenders_from_the_store_and_the_page_loads(tmp_path):
         start = md.index(title)
         return md[start:md.index("\n## ", start + 1)]
 
-    for title in ("## Summary", "## Results", "## Reference values"):
+    for title in ("## Summary", "## Against the baseline", "## Results", "## Reference values"):
         assert section(redone, title) == section(original, title)
-    assert "- **verdict**: exit 0: no regression" in redone
+    assert "- **verdict**: exit 0: no regression" in redone and "t_m:+20%, f_m:+15%" in redone
     page = load_page(tmp_path / "again" / "report.html")
     n_figures = redone.count("\n![")
     assert n_figures == 2                                     # force curves and trend
