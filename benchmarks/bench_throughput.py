@@ -32,9 +32,13 @@ def cli_run(dts: list[str], jobs: int, out: Path) -> float:
     return wall
 
 
-def old_way(dts: list[str]) -> float:
+def old_way(dts: list[str]) -> float | None:
     import impactval
-    from impactval.engines.base import EngineSettings, run_isolated
+    from impactval.engines import base
+
+    run_isolated, EngineSettings = getattr(base, "run_isolated", None), base.EngineSettings
+    if run_isolated is None:                # engines v2 dropped the one-process-per-job helper
+        return None
 
     scene = impactval.load_scene("plate_steel")
     t0 = time.perf_counter()
@@ -61,7 +65,8 @@ def main() -> None:
     print(f"1-job run:                         {one:6.2f} s   (best of {args.repeat})")
     print(f"{args.n}-job run, --jobs {args.jobs}:              {sweep:6.2f} s   ({args.n / sweep:.1f} jobs/s)")
     print(f"ratio {args.n}-job / 1-job:                {sweep / one:6.2f}   (bar: <= 3)")
-    print(f"old way, {args.n} spawned processes:     {old:6.2f} s   ({args.n / old:.1f} jobs/s, engine part only)")
+    if old is not None:
+        print(f"old way, {args.n} spawned processes:     {old:6.2f} s   ({args.n / old:.1f} jobs/s, engine part only)")
 
 
 if __name__ == "__main__":

@@ -297,8 +297,9 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or ([] if tag else catalogue_names())
     _warn_if_compiling()
-    command = "impactval " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("impactval") else \
-        "impactval run " + " ".join(map(str, sys.argv[1:]))
+    import shlex
+
+    command = "impactval " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     try:
         df = run(names, specs, settings, dt=dts if len(dts) > 1 else None, tol=tol, out=out, store=store,
                  workers=jobs, scheduler=scheduler, force=force, progress=make_progress("auto"), tag=tag,

@@ -4,7 +4,8 @@ A job is one engine on one scene with one set of settings. Its key is a SHA-256 
 scene (name, ball, target), the engine spec, the engine's installed version (read from package
 metadata, the engine is never imported here), the adapter's source, the reference version (a hash
 of the reference solver's source files), the reference tolerance and the settings. Two jobs with
-the same key give the same row, so a rerun may reuse a stored one.
+the same key give the same row, so a rerun may reuse a stored one. The job's timeout is not part of
+the key (it cannot change a finished job's numbers; timed-out jobs are never reused).
 """
 from __future__ import annotations
 
@@ -102,7 +103,9 @@ def canonical_scene(scene) -> str:
 
 
 def _canonical_settings(settings) -> str:
-    return json.dumps(settings.as_dict(), sort_keys=True, default=repr)
+    # the timeout decides only whether a job finishes, not its numbers; timed-out rows are retried anyway
+    d = {k: v for k, v in settings.as_dict().items() if k != "timeout_s"}
+    return json.dumps(d, sort_keys=True, default=repr)
 
 
 def job_key(job: Job) -> str:

@@ -16,13 +16,17 @@ def _fmt_s(s: float) -> str:
 
 
 class PlainProgress:
-    """One line per finished job: '[3/40] plate_steel / mujoco dt=1e-06: ok (0.21 s)'."""
+    """One line per finished job: '[3/40] plate_steel / mujoco dt=1e-06: ok (0.21 s)', and every
+    `heartbeat_s` [s] a 'still running' line for each job running that long (CI logs see it live)."""
 
-    def __init__(self, stream: TextIO | None = None) -> None:
+    def __init__(self, stream: TextIO | None = None, heartbeat_s: float = 60.0) -> None:
         self.stream = stream or sys.stderr
         self.total = self.done_n = self.failed = 0
         self.t0 = time.monotonic()
         self._lock = threading.Lock()
+        self.heartbeat_s = heartbeat_s
+        self.running: dict[str, float] = {}
+        self._next_beat: dict[str, float] = {}
 
     def start(self, total: int, reused: int) -> None:
         self.total, self.done_n, self.t0 = total, reused, time.monotonic()
@@ -30,10 +34,25 @@ class PlainProgress:
             self._line(f"{reused} of {total} jobs reused from the store (--force recomputes them)")
 
     def started(self, label: str) -> None:
-        pass
+        with self._lock:
+            now = time.monotonic()
+            self.running[label] = now
+            self._next_beat[label] = now + self.heartbeat_s
+
+    def tick(self) -> None:
+        """Called by the runner about twice a second: heartbeat lines for long jobs."""
+        now = time.monotonic()
+        with self._lock:
+            due = [(lb, t) for lb, t in self.running.items() if now >= self._next_beat.get(lb, now + 1)]
+            for lb, _ in due:
+                self._next_beat[lb] = now + self.heartbeat_s
+        for lb, t in due:
+            self._line(f"  still running: {lb} ({_fmt_s(now - t)})")
 
     def done(self, label: str, row: dict[str, Any], seconds: float) -> None:
         with self._lock:
+            self.running.pop(label, None)
+            self._next_beat.pop(label, None)
             self.done_n += 1
             from impactval.reference.result import Status
 
@@ -61,7 +80,6 @@ class RichProgress(PlainProgress):
         from rich.live import Live
 
         self.console = Console(file=self.stream)
-        self.running: dict[str, float] = {}
         self.reused = 0
         self.live = Live(console=self.console, refresh_per_second=4, transient=True,
                          get_renderable=self._render)
@@ -74,6 +92,9 @@ class RichProgress(PlainProgress):
     def started(self, label: str) -> None:
         with self._lock:
             self.running[label] = time.monotonic()
+
+    def tick(self) -> None:
+        pass                            # the live display shows each running job's time
 
     def done(self, label: str, row: dict[str, Any], seconds: float) -> None:
         with self._lock:

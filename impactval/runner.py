@@ -257,8 +257,8 @@ class _References:
         return self._lin[key]
 
 
-def _notify_start(callback, label: str, fn, *args):
-    callback(label)
+def _notify_start(callback, key: str, fn, *args):
+    callback(key)
     return fn(*args)
 
 
@@ -297,7 +297,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     scheduler : Dask scheduler address ("tcp://host:8786"), Client or LocalCluster, optional
     force : bool
         Recompute jobs already in the store (the new rows replace the stored ones).
-    progress : object with start/started/done/note/close (see `impactval.progress`), optional
+    progress : object with start/started/done/close and optionally tick (see `impactval.progress`)
     out : directory, optional; recorded with the run (exports select runs by it)
     command, tag : recorded with the run
     keep_series : bool
@@ -341,9 +341,11 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         row = make_row(run_id, job.scene, job.spec, job.settings, res, refs.ref(job), refs.lin(job, res), k)
         meta = dict(engine_version=engines[job.spec], adapter_version=_adapter_version(job.spec),
                     reference_version=reference_version(), tol=float(job.tol),
-                    settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr))
+                    settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr),
+                    diagnostics=json.dumps(res.diagnostics or {}, sort_keys=True, default=repr),
+                    validity=json.dumps(list(res.validity or ())))
         stored = db.put(row, run_id=run_id, position=position[k], reused=False, force=force, meta=meta,
-                        series=pack_series(res) if keep_series and res.success else None)
+                        series=pack_series(res) if keep_series and res.success else None, contacts=res.contacts)
         rows[k] = stored
         if progress is not None:
             progress.done(job.label(), stored, seconds)
@@ -351,6 +353,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
             on_row(stored)
 
     client = pool = None
+    futures: dict[Any, str] = {}
     status = RunStatus.FAILED
     try:
         with _Signals():
@@ -367,22 +370,26 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
                     pool, client = ex.dask_executor(scheduler)
                 else:
                     pool = ex.local_executor(workers)
-                futures = {}
-                t_submit = {}
+                t_start: dict[str, float] = {}
+
+                def started(k: str) -> None:
+                    t_start[k] = time.monotonic()
+                    if progress is not None:
+                        progress.started(todo[k].label())
+
                 # grouped by engine: a worker thread keeps serving the engine it has loaded
                 for k, job in sorted(remote.items(), key=lambda kv: kv[1].spec):
-                    if scheduler is None and progress is not None:
-                        fut = pool.submit(_notify_start, progress.started, job.label(), ex.run_job,
-                                          job.spec, job.scene, job.settings)
+                    if scheduler is None:       # a local thread can say when the job starts
+                        fut = pool.submit(_notify_start, started, k, ex.run_job, job.spec, job.scene, job.settings)
                     else:
-                        if progress is not None:
-                            progress.started(job.label())
+                        started(k)
                         fut = pool.submit(ex.run_job, job.spec, job.scene, job.settings)
                     futures[fut] = k
-                    t_submit[k] = time.monotonic()
                 pending = set(futures)
                 while pending:
                     done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                    if progress is not None and hasattr(progress, "tick"):
+                        progress.tick()
                     for fut in done:
                         k = futures[fut]
                         try:
@@ -392,12 +399,14 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
                             res = ImpactResult.failed(job.scene.name, job.spec, Status.CRASHED,
                                                       f"executor lost the job: {type(err).__name__}: {err}",
                                                       settings=job.settings.as_dict())
-                        finish(k, res, time.monotonic() - t_submit[k])
+                        finish(k, res, time.monotonic() - t_start.get(k, time.monotonic()))
             status = RunStatus.FINISHED
     except (_Stop, KeyboardInterrupt) as stop:
         signum = getattr(stop, "signum", signal.SIGINT)
         status = RunStatus.INTERRUPTED
         if pool is not None:
+            for fut in list(futures):
+                fut.cancel()                    # queued jobs; on Dask also the ones running remotely
             _shutdown(pool)
         ex.kill_workers()
         done_rows = [rows[k] for k in dict.fromkeys(keys) if k in rows]
@@ -413,7 +422,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         db.end_run(run_id, status, n_reused, n_failed)
         if progress is not None:
             progress.close()
-        if own_store and out is None and store is not None:
+        if own_store:
             db.close()
     return [rows[k] for k in keys]
 

@@ -12,8 +12,9 @@ concurrent runs lose nothing) or any URL SQLAlchemy understands (`postgresql://.
 - `run_engines(run_id, engine, version)`: the version of each engine a run used.
 - `jobs`: keyed by `job_key` (see `impactval.jobs`); one column per row field of `COLUMN_TYPES`
   (SI units, errors as signed fractions), plus `engine_version`, `adapter_version`,
-  `reference_version`, `tol`, `settings` (JSON text of the EngineSettings), `created_at` and
+  `reference_version`, `tol`, `settings`, `diagnostics`, `validity` (JSON text), `created_at` and
   `series` (optional: the engine's time series, `numpy.savez_compressed` bytes; see `load_series`).
+- `contacts(job_key, idx, t_start, t_end, f_max, delta_max)`: every contact phase of a job [s, N, m].
 - `run_jobs(run_id, job_key, position, reused)`: which jobs each run used, in its order.
 
 Exports (`export`) regenerate `results.csv` (and `results.parquet` when pyarrow is installed, and
@@ -163,9 +164,13 @@ class Store:
         cols = [sa.Column("job_key", sa.String(32), primary_key=True)]
         cols += [sa.Column(c, types[t]) for c, t in COLUMN_TYPES.items() if c != "job_key"]
         cols += [sa.Column(c, sa.Text) for c in ("engine_version", "adapter_version", "reference_version",
-                                                  "settings", "created_at")]
+                                                  "settings", "diagnostics", "validity", "created_at")]
         cols += [sa.Column("tol", sa.Double), sa.Column("series", sa.LargeBinary, nullable=True)]
         self.jobs = sa.Table("jobs", md, *cols)
+        self.contacts = sa.Table(
+            "contacts", md, sa.Column("job_key", sa.String(32), primary_key=True),
+            sa.Column("idx", sa.Integer, primary_key=True), sa.Column("t_start", sa.Double),
+            sa.Column("t_end", sa.Double), sa.Column("f_max", sa.Double), sa.Column("delta_max", sa.Double))
         self.run_jobs = sa.Table(
             "run_jobs", md, sa.Column("run_id", sa.String(36), sa.ForeignKey("runs.id"), primary_key=True),
             sa.Column("job_key", sa.String(32), primary_key=True), sa.Column("position", sa.Integer),
@@ -265,8 +270,10 @@ class Store:
         return found
 
     def put(self, row: dict[str, Any], *, run_id: str, position: int, reused: bool, force: bool = False,
-            meta: dict[str, Any] | None = None, series: bytes | None = None) -> dict[str, Any]:
-        """Store a job row (unless its key is already stored and not `force`) and link it to the run,
+            meta: dict[str, Any] | None = None, series: bytes | None = None,
+            contacts: Iterable = ()) -> dict[str, Any]:
+        """Store a job row (unless its key is already stored and not `force`) with its contact
+        phases (objects with t_start, t_end [s], f_max [N], delta_max [m]) and link it to the run,
         in one transaction; return the row now in the store for that key."""
         values = {c: _to_db(row.get(c)) for c in COLUMN_TYPES}
         values.update(meta or {})
@@ -274,9 +281,17 @@ class Store:
         values["series"] = series
         sa = _sa()
 
+        phases = [dict(job_key=row["job_key"], idx=i, t_start=_to_db(p.t_start), t_end=_to_db(p.t_end),
+                       f_max=_to_db(p.f_max), delta_max=_to_db(p.delta_max)) for i, p in enumerate(contacts)]
+
         def fn(c):
             if not reused:
-                c.execute(self._insert(self.jobs, values, update=force))
+                inserted = c.execute(self._insert(self.jobs, values, update=force)).rowcount
+                if inserted and force:
+                    c.execute(self.contacts.delete().where(self.contacts.c.job_key == row["job_key"]))
+                if inserted:
+                    for ph in phases:
+                        c.execute(self._insert(self.contacts, ph, update=False))
             c.execute(self._insert(self.run_jobs, dict(run_id=run_id, job_key=row["job_key"], position=position,
                                                        reused=reused), update=True))
             r = c.execute(sa.select(*[self.jobs.c[k] for k in COLUMN_TYPES])
@@ -302,6 +317,15 @@ class Store:
         with self.engine.connect() as c:
             recs = [_from_db(dict(r)) for r in c.execute(q).mappings()]
         return pd.DataFrame(recs, columns=list(COLUMN_TYPES))
+
+    def contact_phases(self, job_key: str) -> pd.DataFrame:
+        """Every contact phase of a job: idx (0 = first), t_start, t_end [s], f_max [N], delta_max [m]."""
+        sa = _sa()
+        t = self.contacts
+        with self.engine.connect() as c:
+            recs = [dict(r) for r in c.execute(sa.select(t.c.idx, t.c.t_start, t.c.t_end, t.c.f_max, t.c.delta_max)
+                                               .where(t.c.job_key == job_key).order_by(t.c.idx)).mappings()]
+        return pd.DataFrame(recs, columns=["idx", "t_start", "t_end", "f_max", "delta_max"])
 
     def load_series(self, job_key: str) -> dict[str, Any] | None:
         """The stored series of a job (t [s], f [N], delta [m], x_ball, x_structure [m], energy [J])
@@ -394,6 +418,15 @@ def export(store: Store, out: str | Path) -> list[str]:
     notes (e.g. Parquet skipped) for the user."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    notes = []
+    old = out / "results.csv"
+    if old.is_file():           # a results.csv of an older impactval (not from a store): keep it, say where
+        with old.open(newline="") as fh:
+            header = fh.readline().strip().split(",")
+        if header != list(EXPORT_COLUMNS):
+            aside = out / f"results-old-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}.csv"
+            os.replace(old, aside)
+            notes.append(f"{old} had other columns (an older impactval?): moved to {aside.name}")
     df = store.rows(out=out)
     flat = export_frame(df)
     _atomic_write(out / "results.csv", lambda p: flat.to_csv(p, index=False))
@@ -402,6 +435,6 @@ def export(store: Store, out: str | Path) -> list[str]:
     import importlib.util
 
     if importlib.util.find_spec("pyarrow") is None:
-        return ["results.parquet not written: pip install pyarrow (or 'impactval[parquet]')"]
+        return notes + ["results.parquet not written: pip install pyarrow (or 'impactval[parquet]')"]
     _atomic_write(out / "results.parquet", lambda p: flat.to_parquet(p, index=False))
-    return []
+    return notes

@@ -62,3 +62,21 @@ def test_tag_selects_scenes_and_json_prints_rows(tmp_path):
     assert [r["scene"] for r in rows] == ["plate_steel"] and rows[0]["status"] == "ok"
     assert rows[0]["lin_t_m"] is None and abs(rows[0]["err_f_m"]) < 5e-4
     assert len(rows[0]["run_id"]) == 36 and rows[0]["job_key"]
+
+
+def test_plain_progress_says_a_long_job_is_alive():
+    buf = io.StringIO()
+    p = PlainProgress(buf, heartbeat_s=0.05)
+    p.start(1, 0)
+    p.started("beam / exudyn dt=5e-08")
+    p.tick()
+    assert buf.getvalue() == ""                         # not yet
+    time.sleep(0.06)
+    p.tick()
+    p.tick()                                            # one line per heartbeat, not per tick
+    assert buf.getvalue().startswith("  still running: beam / exudyn dt=5e-08 (0.")
+    assert buf.getvalue().count("still running") == 1
+    p.done("beam / exudyn dt=5e-08", {"status": "ok"}, 0.1)
+    time.sleep(0.06)
+    p.tick()
+    assert buf.getvalue().count("still running") == 1   # finished: no more heartbeats

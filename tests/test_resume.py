@@ -106,18 +106,22 @@ def test_sigkill_halfway_then_rerun_runs_each_job_once(tmp_path):
 
 @requires_mujoco
 @pytest.mark.slow
-def test_sigterm_records_interrupted_writes_report_and_exits_143(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_interrupt_records_interrupted_writes_report_and_exits_128_plus_signal(tmp_path, sig):
+    """SIGTERM -> 143, Ctrl-C (SIGINT) -> 130: the run is recorded as interrupted, the finished jobs
+    are stored, exported and reported, no engine process is left."""
     out = tmp_path / "o"
-    proc, _ = _start_and_kill_halfway(out, signal.SIGTERM)
+    proc, _ = _start_and_kill_halfway(out, sig)
     stdout, stderr = proc.communicate()
-    assert proc.returncode == 143, stderr
-    assert "interrupted by SIGTERM" in stderr and "Traceback" not in stderr
+    name = signal.Signals(sig).name
+    assert proc.returncode == 128 + sig, stderr
+    assert f"interrupted by {name}" in stderr and "Traceback" not in stderr
     assert not _workers_of(proc.pid)
     with sqlite3.connect(out / "impactval.sqlite") as c:
         status, ended, n_stored = c.execute("select status, ended_at, (select count(*) from jobs) from runs").fetchone()
     assert status == "interrupted" and ended and 4 <= n_stored < 12
     report = (out / "report.md").read_text()
-    assert f"**Interrupted** (SIGTERM): {n_stored} of 12 jobs finished" in report
+    assert f"**Interrupted** ({name}): {n_stored} of 12 jobs finished" in report
     assert report.count("| plate_steel | slow-mujoco | hertz |") == n_stored     # the summary table
     assert len(pd.read_csv(out / "results.csv")) == n_stored
 

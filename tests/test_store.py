@@ -92,6 +92,9 @@ def test_series_are_kept_on_request(tmp_path, plate_scene):
     assert set(s) == {"t", "f", "delta", "x_ball", "x_structure", "energy"}
     assert len(s["t"]) == df["n_steps"][0] + 1 or len(s["t"]) == df["n_steps"][0]
     assert s["f"].max() == pytest.approx(df["f_m"][0], rel=1e-2)    # sampled peak vs parabola-refined
+    phases = Store(tmp_path / "impactval.sqlite").contact_phases(df["job_key"][0])
+    assert len(phases) == df["n_contacts"][0] == 1
+    assert phases["t_end"][0] - phases["t_start"][0] == df["t_m"][0] and phases["f_max"][0] == df["f_m"][0]
 
 
 @requires_mujoco
@@ -126,3 +129,33 @@ def test_postgresql_store_same_rows_as_sqlite_and_resume(postgres_url, tmp_path)
     both = db.rows(out=tmp_path / "both")
     assert len(both) == 4 and both["job_key"].is_unique and sorted(both["dt"]) == [1.5e-7, 2e-7, 3e-7, 4e-7]
     db.close()
+
+
+def test_job_key_changes_with_what_decides_the_row_only(plate_scene):
+    from dataclasses import replace
+
+    import impactval
+    from impactval.engines.base import EngineSettings
+    from impactval.jobs import Job
+
+    base = Job(plate_scene, "mujoco", EngineSettings(dt=1e-6), 1e-6)
+    assert base.key == Job(impactval.load_scene("plate_steel"), "mujoco", EngineSettings(dt=1e-6), 1e-6).key
+    assert base.key == replace(base, settings=EngineSettings(dt=1e-6, timeout_s=5)).key     # timeout: no
+    others = [replace(base, settings=EngineSettings(dt=5e-7)), replace(base, tol=1e-7), replace(base, spec="pybullet"),
+              replace(base, settings=EngineSettings(dt=1e-6, options=(("x", 1),))),
+              replace(base, scene=impactval.load_scene("beam_ss_midspan"))]
+    keys = {base.key} | {j.key for j in others}
+    assert len(keys) == 1 + len(others) and all(len(k) == 32 for k in keys)
+
+
+def test_an_older_results_csv_is_moved_aside_with_a_note(tmp_path):
+    (tmp_path / "results.csv").write_text("schema_version,run_id,err_t_m\n2,x,0.1\n")
+    db = Store(tmp_path / "impactval.sqlite")
+    db.begin_run("r", "test", tmp_path, {}, "ref")
+    db.put(_row(), run_id="r", position=0, reused=False)
+    notes = export(db, tmp_path)
+    aside = list(tmp_path.glob("results-old-*.csv"))
+    assert len(aside) == 1 and aside[0].read_text().startswith("schema_version,run_id,err_t_m\n2,x,0.1")
+    assert any("moved to results-old-" in n for n in notes)
+    assert pd.read_csv(tmp_path / "results.csv")["job_key"].tolist() == ["k1"]
+    assert export(db, tmp_path) == [] and len(list(tmp_path.glob("results-old-*.csv"))) == 1   # ours: kept
