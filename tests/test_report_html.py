@@ -115,3 +115,13 @@ def test_chromium_check_catches_broken_pages(tmp_path):
     res = load_page(bad)
     assert res["images_total"] == 1 and res["images_loaded"] == 0
     assert any("deliberate" in e for e in res["console_errors"]) and len(res["console_errors"]) >= 2
+
+
+def test_presentation_modules_import_no_plotting_or_engine():
+    from conftest import run_py
+
+    code = ("import impactval.reports.run_report, impactval.reports.html, impactval.reports.build, "
+            "impactval.reports.plots, impactval.reports.provenance, impactval.reports.style, impactval.nightly, "
+            "impactval.history, impactval.cli_nightly; import sys; "
+            "print(sorted({'matplotlib', 'mujoco', 'pybullet', 'exudyn'} & set(sys.modules)) or '')")
+    assert run_py(code) == ""
