@@ -125,3 +125,19 @@ def test_presentation_modules_import_no_plotting_or_engine():
             "impactval.history, impactval.cli_nightly; import sys; "
             "print(sorted({'matplotlib', 'mujoco', 'pybullet', 'exudyn'} & set(sys.modules)) or '')")
     assert run_py(code) == ""
+
+
+def test_reference_provenance(plate_scene, plate):
+    import impactval
+    from impactval.reports.provenance import LITERATURE, reference_record
+
+    rec = reference_record(plate_scene, impactval.solve(plate_scene, tol=1e-6))
+    assert (rec["t_m"], rec["f_m"], rec["delta_m"]) == (plate.t_m, plate.f_m, plate.delta_m)   # the closed form
+    assert rec["provenance"].startswith("closed form (Hertz, paper eq. 31-33); the Volterra solver agrees to")
+    _, t_m, f_m, delta_m = LITERATURE["plate_steel"]       # 6 published digits: agreement within rounding
+    assert abs(rec["t_m"] / t_m - 1) < 1e-5 and abs(rec["f_m"] / f_m - 1) < 1e-5 and "literature:" in rec["provenance"]
+    beam = impactval.load_scene("beam_ss_midspan")
+    ref = impactval.solve(beam, tol=1e-4)
+    rec = reference_record(beam, ref)
+    assert rec["provenance"].startswith(f"Volterra solver (hertz-modal+static, {ref.modes} modes, tol 0.0001)")
+    assert 0 < rec["u_f_m"] <= 1e-4 * rec["f_m"] and rec["n_contacts"] == len(ref.contacts) >= 1
