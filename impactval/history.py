@@ -148,8 +148,9 @@ def score(row) -> float:
 
 
 def _cell(k: str, v) -> object:
-    if k == "dt":
-        return _num(v)
+    if k == "dt":                   # a time step [s], or a word such as "auto"
+        x = _num(v)
+        return x if math.isfinite(x) else str(v)
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return ""
     v = str(v)
@@ -235,11 +236,15 @@ def comparable(cmp: pd.DataFrame) -> int:
     return int((cmp["mark"] != "x").sum()) if len(cmp) else 0
 
 
+def _fmt(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
 def differing_keys(new: pd.DataFrame, old: pd.DataFrame) -> list[str]:
     """Why rows do not match: for each KEY column (and the scene hash) whose values differ between the
     two runs, 'column: baseline A, B; now C' (values sorted, at most 4 each)."""
     def values(df: pd.DataFrame, k: str) -> list[str]:
-        vals = sorted({f"{_cell(k, v):g}" if k == "dt" else str(_cell(k, v)) for v in df[k]}) if k in df else []
+        vals = sorted({_fmt(_cell(k, v)) for v in df[k]}) if k in df else []
         return [v if v != "" else "(default)" for v in vals]
 
     out = []
@@ -313,7 +318,7 @@ def flagged_lines(cmp: pd.DataFrame) -> list[str]:
     order = {"!": 0, "+": 1, "*": 2, "-": 3, "x": 4}
     lines = []
     for _, r in cmp[cmp["mark"] != ""].sort_values("mark", key=lambda s: s.map(order), kind="stable").iterrows():
-        lines.append(f"  {r['mark']} {r['scene']} / {r['engine']} ({r['contact']}, dt={_num(r['dt']):g}"
+        lines.append(f"  {r['mark']} {r['scene']} / {r['engine']} ({r['contact']}, dt={_fmt(_cell('dt', r['dt']))}"
                      f"{', N=' + str(_cell('segments', r['segments'])) if _cell('segments', r['segments']) else ''}): "
                      f"{r['why']}")
     return lines

@@ -212,6 +212,11 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         if not specs:
             raise ImpactvalError("--engines: give at least one engine.")
     settings = settings or EngineSettings(**NIGHTLY_SETTINGS)
+    from impactval.engines.options import check_prefixes
+    from impactval.runner import _check_settings_somewhere
+
+    check_prefixes(settings.options, specs)           # "bullet.x": no such engine tonight -> exit 2
+    _check_settings_somewhere(specs, settings)        # settings no engine accepts -> exit 2 before any job
     out = Path(out)
     db = Store(store if store is not None else out / "impactval.sqlite")
     try:

@@ -63,10 +63,16 @@ class _Stop(BaseException):
 
 
 def resolve_engine(spec: str) -> str:
-    """Check an engine name ("mujoco") or import path ("pkg.module:Class"); return it unchanged."""
+    """Check an engine name ("mujoco"), entry point (group impactval.engines) or import path
+    ("pkg.module:Class", which must name an EngineAdapter subclass); return it unchanged."""
     if not isinstance(spec, str) or not spec.strip():
         raise EngineError(f"engine names must be non-empty strings, got {spec!r}.")
-    if spec in ENGINES or (":" in spec and all(spec.split(":", 1))):
+    if spec in ENGINES:
+        return spec
+    from impactval.engines.base import _entry_points, adapter_class
+
+    if ":" in spec or spec in _entry_points():
+        adapter_class(spec)          # EngineError (exit 2) when it is not an adapter class
         return spec
     installed = [n for n, m in ENGINE_MODULES.items() if importlib.util.find_spec(m)]
     raise EngineError(f"unknown engine {spec!r}; known: {', '.join(ENGINES)} (installed: "
@@ -209,17 +215,11 @@ def _as_scene(s):
 
 
 def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
-    """The settings one engine gets: options named "ENGINE.key" go to that engine only (as "key"),
-    plain "key" options to every engine."""
-    name = spec.split(":")[-1].lower() if ":" in spec else spec
-    opts = []
-    for key, value in settings.options:
-        head, dot, rest = key.partition(".")
-        if not dot:
-            opts.append((key, value))
-        elif head.lower() in (name, spec):
-            opts.append((rest, value))
-    return replace(settings, options=tuple(opts))
+    """The settings one engine gets (engines.options.options_for): "ENGINE.key" options go to that
+    engine only (as "key"), plain "key" options to every engine."""
+    from impactval.engines.options import options_for
+
+    return options_for(settings, spec)
 
 
 # ---------------------------------------------------------------------------- execution
@@ -503,6 +503,9 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                                   timeout_s=timeout_s).items() if v is not None}
     variants = [replace(base, dt=step, **over) for step in dts]
     settings = variants[0]
+    from impactval.engines.options import check_prefixes
+
+    check_prefixes(settings.options, specs)       # "bullet.x": no such engine in this run -> exit 2
     _check_settings_somewhere(specs, settings)
     if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
         raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {threshold!r}.")

@@ -28,7 +28,9 @@ def _label(r, several: bool) -> str:
         return str(r["engine"])
     seg = str(r["segments"])
     seg = seg[:-2] if seg.endswith(".0") else seg
-    return f"{r['engine']} {r['contact']} dt={float(r['dt']):g}" + (f" N={seg}" if seg not in ("", "nan") else "")
+    from impactval.reports.run_report import _dt
+
+    return f"{r['engine']} {r['contact']} dt={_dt(r['dt'])}" + (f" N={seg}" if seg not in ("", "nan") else "")
 
 
 def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True

@@ -89,7 +89,11 @@ def force_curves_plot(scene: str, reference: tuple[np.ndarray, np.ndarray] | Non
 def _series_label(r) -> str:
     seg = str(r["segments"]) if str(r["segments"]) not in ("", "nan") else ""
     seg = seg[:-2] if seg.endswith(".0") else seg
-    return f"{r['engine']} {r['contact']} dt={float(r['dt']):g}" + (f" N={seg}" if seg else "")
+    try:
+        dt = f"{float(r['dt']):g}"
+    except (TypeError, ValueError):
+        dt = str(r["dt"])
+    return f"{r['engine']} {r['contact']} dt={dt}" + (f" N={seg}" if seg else "")
 
 
 def trend_plot(history: pd.DataFrame, scene: str, path: str | Path) -> Path | None:

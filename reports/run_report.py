@@ -51,6 +51,12 @@ def _seg(x: Any) -> str:
     return s[:-2] if s.endswith(".0") else s
 
 
+def _dt(x: Any) -> str:
+    """A time step [s] as text ("auto" and other words stay as they are)."""
+    v = _num(x)
+    return f"{v:g}" if math.isfinite(v) else ("" if x is None or (isinstance(x, float)) else str(x))
+
+
 def _col(r, key: str) -> Any:
     return r[key] if key in r else math.nan
 
@@ -61,7 +67,7 @@ _COLUMNS = (
     ("engine", lambda r: str(r["engine"]), False),
     ("contact", lambda r: str(r["contact"]), False),
     ("integrator", lambda r: "" if pd.isna(r["integrator"]) else str(r["integrator"]), False),
-    ("dt [s]", lambda r: f"{_num(r['dt']):g}", False),
+    ("dt [s]", lambda r: _dt(r["dt"]), False),
     ("N", lambda r: _seg(r["segments"]), False),
     ("status", lambda r: str(r["status"]), False),
     ("contacts", lambda r: _int(_col(r, "n_contacts")) if str(r["status"]) == "ok" else "", True),
@@ -186,7 +192,7 @@ def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.
     order = {"!": 0, "+": 1, "*": 2, "-": 3, "x": 4}
     if len(flagged):
         for _, r in flagged.sort_values("mark", key=lambda s: s.map(order), kind="stable").iterrows():
-            out.append(f"- `{r['mark']}` {r['scene']} / {r['engine']} ({r['contact']}, dt = {_num(r['dt']):g} s"
+            out.append(f"- `{r['mark']}` {r['scene']} / {r['engine']} ({r['contact']}, dt = {_dt(r['dt'])} s"
                        f"{', N = ' + _seg(r['segments']) if _seg(r['segments']) else ''}): {r['why']}")
         out.append("")
     header = ["mark", "scene", "engine", "contact", "dt [s]", "N", "version", "baseline %", "now %", "change"]
@@ -194,7 +200,7 @@ def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.
     for _, r in cmp.sort_values("mark", key=lambda s: s.map(lambda m: order.get(m, 5)), kind="stable").iterrows():
         ch = _num(r["change"])
         version = r["version"] if r["old_version"] == r["version"] else f"{r['old_version']} -> {r['version']}"
-        cells.append([r["mark"], r["scene"], r["engine"], r["contact"], f"{_num(r['dt']):g}", _seg(r["segments"]),
+        cells.append([r["mark"], r["scene"], r["engine"], r["contact"], _dt(r["dt"]), _seg(r["segments"]),
                       version, _pct_abs(r["old_score"]), _pct_abs(r["score"]),
                       "" if not math.isfinite(ch) else f"{100 * ch:+.1f} %"])
     out += ["Largest |error| of t_m, f_m, delta_m per row, in %:", ""]
@@ -207,7 +213,7 @@ def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.
         out += ["", "### Stepping wall time over the history", "",
                 "Wall times are noisy: a row is flagged only when each of the last nights is past the threshold "
                 "against the median of the nights before (a step that persists).", ""]
-        tcells = [[r["scene"], r["engine"], r["contact"], f"{_num(r['dt']):g}", _seg(r["segments"]), r["state"],
+        tcells = [[r["scene"], r["engine"], r["contact"], _dt(r["dt"]), _seg(r["segments"]), r["state"],
                    str(r["nights"]), _ms(r["before_s"]), _ms(r["after_s"]),
                    "" if not math.isfinite(_num(r["ratio"])) else f"{_num(r['ratio']):.2f}"]
                   for _, r in trend.iterrows()]
@@ -270,7 +276,7 @@ def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFra
             v = ", ".join(f"{k} {x}" for k, x in v.items())
         out.append(f"- **{label}**: {v}")
     if settings is not None:
-        steps = f"{settings.dt:g}"
+        steps = _dt(settings.dt)
         if df is not None and len(df):
             steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
                                                         reverse=True)) or steps
