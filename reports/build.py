@@ -115,7 +115,14 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
     plots = plots and importlib.util.find_spec("matplotlib") is not None
     figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots)
     if plots and history is not None and len(history) and history["run_index"].nunique() > 1:
+        from impactval.history import row_key
         from impactval.reports.plots import trend_plot
+
+        slow = set() if trend is None or not len(trend) else {
+            row_key(r) for _, r in trend[trend["state"] == "slower"].iterrows()}
+        last = history["run_index"].max()
+        history = history.assign(wall_mark=[bool(slow) and ri == last and row_key(r) in slow
+                                            for ri, (_, r) in zip(history["run_index"], history.iterrows())])
 
         for name in dict.fromkeys(rows["scene"]):
             p = trend_plot(history, name, out / f"trend_{_safe(name)}.png")

@@ -101,7 +101,8 @@ def trend_plot(history: pd.DataFrame, scene: str, path: str | Path) -> Path | No
 
     `history`: rows with run_index (0 = oldest), night (label for the x axis), KEY columns, status,
     err_t_m, err_f_m, err_delta_m, wall_time_step_s and mark (this night against the one before).
-    Nights marked `+` (worse) or `!` (newly failing) get a red marker on every panel."""
+    Nights marked `+` (worse) or `!` (newly failing) get a red marker on the error panels; rows with a
+    truthy `wall_mark` (a persisting wall-time step, impactval.history.wall_time_steps) on the wall-time panel."""
     plt = _pyplot()
     h = history[history["scene"] == scene] if len(history) else history
     if plt is None or not len(h):
@@ -120,7 +121,9 @@ def trend_plot(history: pd.DataFrame, scene: str, path: str | Path) -> Path | No
             ax.plot(g["run_index"], y, marker="o", ms=3, color=engine_colour(engine), ls=_DASHES[n % len(_DASHES)],
                     lw=1.2, label=label)
             bad = g["mark"].isin(["+", "!"]) if "mark" in g else pd.Series(False, index=g.index)
-            if bad.any() and col != "wall_time_step_s":       # marks flag errors; wall time has its own check
+            if col == "wall_time_step_s":                      # wall time has its own (history) check
+                bad = g["wall_mark"].astype(bool) if "wall_mark" in g else pd.Series(False, index=g.index)
+            if bad.any():
                 yb = y[bad]
                 yb = yb.where(yb.notna(), np.nanmin(y) if np.isfinite(y).any() else 0.0)
                 ax.scatter(g.loc[bad, "run_index"], yb, label=None, **REGRESSION_MARKER)

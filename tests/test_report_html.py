@@ -141,3 +141,18 @@ def test_reference_provenance(plate_scene, plate):
     rec = reference_record(beam, ref)
     assert rec["provenance"].startswith(f"Volterra solver (hertz-modal+static, {ref.modes} modes, tol 0.0001)")
     assert 0 < rec["u_f_m"] <= 1e-4 * rec["f_m"] and rec["n_contacts"] == len(ref.contacts) >= 1
+
+
+def test_trend_plot_marks_a_wall_time_step(tmp_path):
+    from impactval.history import wall_time_steps
+    from impactval.reports.plots import trend_plot
+    from test_nightly import red_pixels
+
+    walls = [0.010, 0.011, 0.009, 0.020, 0.021, 0.019]                 # a step persisting over three nights
+    h = pd.concat([rows().iloc[:1].assign(run_index=i, night=f"n{i}", mark="", wall_time_step_s=w)
+                   for i, w in enumerate(walls)], ignore_index=True)
+    trend = wall_time_steps(h)
+    assert list(trend["state"]) == ["slower"]
+    plain = trend_plot(h, "plate_steel", tmp_path / "plain.png")
+    marked = trend_plot(h.assign(wall_mark=h["run_index"] == 5), "plate_steel", tmp_path / "marked.png")
+    assert red_pixels(plain) == 0 and red_pixels(marked) > 20
