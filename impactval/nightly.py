@@ -389,7 +389,17 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
                                  baseline=base_label, checks=checks, history=hist, trend=trend, tol=tol, extra_info=info,
                                  extra_md=verdict)
         else:
-            paths = write_report(db, run["id"], dest, tol=tol)
+            rows = db.rows(run_id=run["id"])
+            extra = ""
+            if pd.to_numeric(rows["dt"], errors="coerce").nunique() > 1:      # a speed/accuracy sweep
+                from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
+
+                extra = speed_accuracy_table(rows)
+                dest.mkdir(parents=True, exist_ok=True)
+                png = speed_accuracy_plot(rows, dest / "speed_accuracy.png")
+                if png is not None:
+                    extra += f"\n![wall time vs error]({png.name})\n"
+            paths = write_report(db, run["id"], dest, rows=rows, tol=tol, extra_md=extra)
         return [f"run {run['id']} ({run['status']}, {str(run['started_at'])[:19]})"], list(paths)
     finally:
         db.close()
