@@ -197,7 +197,8 @@ def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, Thre
         elif str(o.get("scene_hash", "")) != str(r.get("scene_hash", "")):
             mark, why = "x", f"scene or reference changed (scene hash {o.get('scene_hash', '')} -> {r.get('scene_hash', '')})"
         elif _ok(o["status"]) and not _ok(r["status"]):
-            mark, why = "!", f"{o['status']} -> {r['status']}: {r.get('message', '')}".rstrip(": ")
+            msg = " ".join(str(r.get("message", "") or "").split())
+            mark, why = "!", f"{o['status']} -> {r['status']}: {msg}".rstrip(": ")
         elif not _ok(o["status"]) and _ok(r["status"]):
             mark, why = "*", f"{o['status']} -> ok"
         elif _ok(r["status"]):

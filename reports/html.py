@@ -41,7 +41,7 @@ def _inline(text: str) -> str:
             continue
         s = html.escape(p, quote=False)
         s = re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", s)
-        s = re.sub(r"(?<![\w*])\*([^*]+)\*(?![\w*])", r"<em>\1</em>", s)
+        s = re.sub(r"(?<![\w*])\*(\S[^*]*\S|\S)\*(?![\w*])", r"<em>\1</em>", s)
         out.append(s)
     return "".join(out)
 

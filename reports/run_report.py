@@ -331,7 +331,7 @@ def markdown_report(df: pd.DataFrame, settings=None, *, info: Mapping[str, Any] 
     if len(bad):
         out += ["## Rows without a result", ""]
         for _, r in bad.iterrows():
-            out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {r['message']}")
+            out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {' '.join(str(r['message']).split())}")
         out.append("")
     if "structure_frequencies" in df:
         freq = df[df["structure_frequencies"].fillna("").astype(str).str.len() > 0]
