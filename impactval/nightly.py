@@ -12,9 +12,11 @@ stepping wall time stepped up over several nights; 2 bad input, nothing could ru
 comparable with the baseline (a drifted setup is an error, never a pass). The first night of a
 suite has no baseline: it exits 0 (1 when a job failed) and becomes the baseline.
 
-The baseline is the last *good* night (finished, verdict 0) of the same suite and store, or the
-run given with `baseline=`; a regression therefore stays red until it is fixed, or accepted by
-running once with `--baseline` set to the regressed night.
+The baseline is the last *good* night of the same suite and store (finished, no regression against
+its own baseline; the first night counts as good even when some of its jobs failed: they are the
+starting point, and later nights flag only what is new), or the run given with `baseline=`; a
+regression therefore stays red until it is fixed, or accepted by running once with `--baseline` set
+to the regressed night.
 """
 from __future__ import annotations
 
@@ -73,14 +75,15 @@ def _night_job(job, night: str):
 # ---------------------------------------------------------------------------- the store's nightly side
 def _verdicts(store):
     """The `nightly_verdicts` table (created on first use): run_id, suite, night, exit_code,
-    baseline_run_id, message, checks (the thresholds used, as --fail-on texts)."""
+    baseline_run_id, message, checks (the thresholds used, as --fail-on texts), good (may serve as a baseline:
+    no regression against its own baseline, or the first night of the suite, and something was comparable)."""
     import sqlalchemy as sa
 
     md = sa.MetaData()
     table = sa.Table("nightly_verdicts", md, sa.Column("run_id", sa.String(36), primary_key=True),
                      sa.Column("suite", sa.Text), sa.Column("night", sa.Text), sa.Column("exit_code", sa.Integer),
                      sa.Column("baseline_run_id", sa.Text), sa.Column("message", sa.Text),
-                     sa.Column("checks", sa.Text))
+                     sa.Column("checks", sa.Text), sa.Column("good", sa.Boolean))
     md.create_all(store.engine, checkfirst=True)
     return table
 
@@ -94,23 +97,23 @@ def nightly_runs(store, suite: str) -> pd.DataFrame:
     runs = store.runs
     prefix = f"{TAG_PREFIX}/{suite}/"
     q = (sa.select(runs.c.id, runs.c.tag, runs.c.status, runs.c.started_at, runs.c.ended_at, v.c.exit_code,
-                   v.c.baseline_run_id, v.c.message, v.c.checks)
+                   v.c.baseline_run_id, v.c.message, v.c.checks, v.c.good)
          .select_from(runs.outerjoin(v, v.c.run_id == runs.c.id))
          .where(runs.c.tag.like(prefix.replace("%", r"\%").replace("_", r"\_") + "%", escape="\\"))
          .order_by(runs.c.started_at, runs.c.id))
     with store.engine.connect() as c:
         recs = [dict(r) for r in c.execute(q).mappings()]
     df = pd.DataFrame(recs, columns=["id", "tag", "status", "started_at", "ended_at", "exit_code", "baseline_run_id",
-                                     "message", "checks"])
+                                     "message", "checks", "good"])
     df["night"] = df["tag"].str.slice(len(prefix))
     return df
 
 
 def _record_verdict(store, run_id: str, suite: str, night: str, code: int, baseline: str | None, msg: str,
-                    checks: str = "") -> None:
+                    checks: str = "", good: bool = False) -> None:
     v = _verdicts(store)
     values = dict(run_id=run_id, suite=suite, night=night, exit_code=code, baseline_run_id=baseline, message=msg,
-                  checks=checks)
+                  checks=checks, good=bool(good))
     with store.engine.begin() as c:
         c.execute(v.delete().where(v.c.run_id == run_id))
         c.execute(v.insert().values(**values))
@@ -129,9 +132,10 @@ def resume_night(runs: pd.DataFrame) -> str | None:
 
 
 def last_good(runs: pd.DataFrame, night: str) -> pd.Series | None:
-    """The newest finished run of another night whose verdict was 0 (the baseline), else None."""
-    ok = runs[(runs["status"] == "finished") & (runs["night"] != night)
-              & (pd.to_numeric(runs["exit_code"], errors="coerce") == 0)]
+    """The newest finished run of another night marked good (no regression against its own baseline,
+    or the first night of the suite: failures it had are the starting point), else None."""
+    good = runs["good"].map(lambda x: bool(x) if x is not None and x == x else False)
+    ok = runs[(runs["status"] == "finished") & (runs["night"] != night) & good]
     return ok.iloc[-1] if len(ok) else None
 
 
@@ -244,7 +248,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         hist = history_rows(db, runs, run_id, history_nights, checks)
         trend = history.wall_time_steps(hist, checks["wall_time"].rel) if len(hist) else history.wall_time_steps(None)
         cmp = None
-        code, message = 0, ""
+        code, message, good = 0, "", False
         failed = df["status"].isin(["crashed", "timeout", "unstable", "no-contact"])
         ran = ~df["status"].isin(["not-installed", "skipped"])
         if not ran.any():
@@ -253,11 +257,11 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
                        + "; ".join(sorted(set(df["message"].astype(str))))[:400] + ")")
         elif base is None:
             code = 1 if failed.any() else 0
-            message = ("first night of this suite in the store: no baseline yet; this run becomes the baseline"
-                       if not runs[(runs["status"] == "finished") & (runs["night"] != night)].shape[0] else
-                       "no good night to compare with (every earlier night regressed); give --baseline RUN_ID")
+            good = True
+            message = "first night of this suite in the store: no baseline yet; this run becomes the baseline"
             if failed.any():
-                message += f"; {int(failed.sum())} jobs failed"
+                message += (f"; {int(failed.sum())} jobs failed (exit 1 tonight; later nights flag only what is "
+                            f"new)")
         else:
             base_rows = db.rows(run_id=base["id"])
             cmp = history.compare(df, base_rows, checks)
@@ -276,12 +280,13 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
                 if len(slower):
                     message += f", {len(slower)} slower over the last nights"
             else:
+                good = True
                 counts = history.summary_counts(cmp)
                 message = (f"no regression against the baseline run {base['id']} ({history.comparable(cmp)} of "
                            f"{len(cmp)} rows compared, {counts['changed']} changed, {counts['-']} better, "
                            f"{counts['*']} fixed)")
         base_id = None if base is None else str(base["id"])
-        _record_verdict(db, run_id, suite, night, code, base_id, message, history.check_names(checks))
+        _record_verdict(db, run_id, suite, night, code, base_id, message, history.check_names(checks), good)
         verdict_md = (f"\n## Verdict\n\nExit code **{code}**: {message}.\n"
                       + (f"\nResumed night {night}: the jobs that finished before the interruption were reused.\n"
                          if resumed else ""))

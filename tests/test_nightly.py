@@ -228,3 +228,23 @@ def test_sigterm_writes_the_partial_report_and_exits_143(tmp_path):
     assert "rerun to resume the night" in err
     md = (tmp_path / "out" / "report.md").read_text()
     assert "interrupted" in md and "plate_steel" in md
+
+
+@requires_mujoco
+def test_a_job_failing_from_the_first_night_is_not_new(tmp_path):
+    """A job that fails on the first night (exit 1) is the starting point: the next unchanged night is
+    compared with it and passes (a job that starts failing later is '!': test_history.test_marks)."""
+    from impactval.nightly import nightly
+
+    def go():
+        return nightly(["plate_steel", "beam_ss_midspan"], "mujoco", EngineSettings(dt=1e-6),
+                       store=tmp_path / "h.sqlite", out=tmp_path / "out")
+
+    first = go()
+    st = dict(zip(first.rows["scene"], first.rows["status"]))
+    if st["beam_ss_midspan"] == "ok":
+        pytest.skip("MuJoCo's default beam chain is stable at dt = 1e-6 s in this version")
+    assert first.exit_code == 1 and "jobs failed" in first.message
+    second = go()
+    assert second.exit_code == 0 and second.baseline_run_id == first.run_id, second.message
+    assert list(second.cmp["mark"]) == ["", ""]
