@@ -156,3 +156,14 @@ def test_trend_plot_marks_a_wall_time_step(tmp_path):
     plain = trend_plot(h, "plate_steel", tmp_path / "plain.png")
     marked = trend_plot(h.assign(wall_mark=h["run_index"] == 5), "plate_steel", tmp_path / "marked.png")
     assert red_pixels(plain) == 0 and red_pixels(marked) > 20
+
+
+def test_two_spheres_are_closed_form():
+    import impactval
+    from impactval.reports.provenance import reference_record
+
+    sc = impactval.load_scene("ball_ball_steel_on_aluminium")
+    ref = impactval.solve(sc, tol=1e-6)
+    rec = reference_record(sc, ref)
+    assert rec["provenance"].startswith("closed form (Hertz, two spheres")
+    assert abs(rec["f_m"] / ref.f_m - 1) <= 2 * ref.uncertainty.f_m / ref.f_m     # within the solver's bound
