@@ -206,6 +206,8 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
     `adjust(n) -> n` lets an engine move N (e.g. PyBullet: impact point near a segment centre)."""
     from impactval.reference.modechoice import required_modes
 
+    actual = scene
+    scene = euler_bernoulli(scene)  # a chain discretises Euler-Bernoulli: size it against that theory
     beam = scene.target
     adjust = adjust or (lambda n: n)
     count = required_modes(scene, tol).count
@@ -221,7 +223,27 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
             break
         n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(me.largest / tol) * 1.05))))
         me = model_error(scene, hencky_chain(beam, n, rotary))
+    if me.largest > tol:          # capped: the error depends on where the impact point sits in its segment,
+        best = (me.largest, n, me)  # so take the N near the cap with the smallest model error
+        for m in range(max(MIN_SEGMENTS, max_segments - 12), max_segments + 1):
+            e = model_error(scene, hencky_chain(beam, m, rotary))
+            if e.largest < best[0]:
+                best = (e.largest, m, e)
+        _, n, me = best
+    if actual is not scene:       # reported against the scene's own theory: discretisation + structure theory
+        me = model_error(actual, hencky_chain(beam, n, rotary))
     return ChainSizing(n, count, _freq_error(beam, hencky_chain(beam, n, rotary), count), me)
+
+
+def euler_bernoulli(scene):
+    """`scene` with its beam in Euler-Bernoulli theory (the theory a Hencky chain discretises);
+    the scene itself when it already is (or is not a beam)."""
+    import dataclasses
+
+    target = scene.target
+    if getattr(target, "theory", "euler-bernoulli") == "euler-bernoulli":
+        return scene
+    return dataclasses.replace(scene, target=dataclasses.replace(target, theory="euler-bernoulli"))
 
 
 def centred(impact_at: float, lo: int, hi: int, prefer: int) -> int:
