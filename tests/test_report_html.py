@@ -46,6 +46,9 @@ def test_engine_colours_are_defined_once_and_stable():
     assert engine_colour("pkg.mod:MujocoAdapter".replace("MujocoAdapter", "mujoco")) == ENGINE_COLOURS["mujoco"]
     assert engine_colour("someengine") == engine_colour("someengine")
     assert len(set(ENGINE_COLOURS.values())) == len(ENGINE_COLOURS)
+    from impactval.engines import ENGINES
+
+    assert set(ENGINES) <= set(ENGINE_COLOURS)               # every registered engine has its own colour
 
 
 def _png(path, colour=(1.0, 0.0, 0.0)):
