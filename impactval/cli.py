@@ -52,6 +52,9 @@ def main() -> None:
     """impactval: validation suite for physics engines on elastic impact (SI units)."""
 
 
+main.add_command(__import__("impactval.cli_engines", fromlist=["engines_command"]).engines_command)
+
+
 @main.command()
 @click.option("--tag", default=None, help="Only scenes carrying this tag.")
 def scenes(tag: str | None) -> None:
