@@ -97,3 +97,34 @@ def test_dt_limit_is_the_reduced_mass_on_the_contact_spring(engine, integrator, 
     closed = two_sphere_impact(sc)
     omega = math.sqrt(1.5 * sc.alpha * math.sqrt(closed.delta_m) / reduced_mass(sc))
     assert plan.dt_limit == pytest.approx(bound / omega, rel=1e-12)
+
+
+def test_base_sees_the_two_ball_contact():
+    """No engine needed: the base's contact times, contact mass and through-depth describe the relative
+    motion of two free balls (closed form of reference/spheres.py), so dt auto, the window and the default
+    limit follow the two-ball contact; the through-target depth is the smaller radius."""
+    from impactval.engines.base import contact_mass, plate_times, through_depth
+    from impactval.scenarios.scene import scene_from_dict
+
+    sc = impactval.load_scene("ball_ball_steel_on_aluminium")
+    closed, p = two_sphere_impact(sc), plate_times(sc)
+    assert (p.t_m, p.f_m, p.delta_m) == pytest.approx((closed.t_m, closed.f_m, closed.delta_m), rel=1e-14)
+    assert contact_mass(sc) == pytest.approx(sc.ball.mass * sc.target.mass / (sc.ball.mass + sc.target.mass), rel=1e-14)
+    small = scene_from_dict({"ball": {"radius": 0.02, "velocity": 1.0, "material": "steel"},
+                             "target": {"kind": "ball", "radius": 0.005, "material": "steel"}})
+    assert through_depth(small) == 0.005 and through_depth(sc) == sc.ball.radius
+    plate = impactval.load_scene("plate_steel")
+    assert contact_mass(plate) == plate.ball.mass and through_depth(plate) == plate.ball.radius
+
+
+def test_fake_adapter_runs_two_balls_in_closed_form():
+    """The analytic adapter (always installed) on the DEM glass case: the closed form to the metric code's
+    sampling accuracy, both balls' velocities after the contact from momentum and energy."""
+    sc = impactval.load_scene("ball_ball_glass_dem")
+    closed = two_sphere_impact(sc)
+    r = load_adapter("impactval.engines.fake_:HertzSpringAdapter").run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, closed.t_m), (r.f_m, closed.f_m), (r.delta_m, closed.delta_m)):
+        assert rel(got, want) <= 1e-4
+    u1, _ = two_sphere_velocities_after(sc)
+    assert rel(-r.rebound_velocity, u1) <= 1e-9
