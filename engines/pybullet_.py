@@ -66,7 +66,6 @@ from impactval.engines.base import EngineSettings, Plan, SteppingAdapter, plate_
 from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
 from impactval.engines.options import in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
-from impactval.reference.hertz import plate_impact
 
 NATIVE_ROUTES = ("global", "per-body")
 #: how many chain frequencies go into the diagnostics
