@@ -5,6 +5,8 @@ with velocity -v0 in y. The target is
 - a rigid plate: the top of a ground "sphere" of the ball's radius (Exudyn needs radii > 0; the
   motion is along the line of centres, so the gap is exactly the plate's);
 - a modal target (kind "modal"): an FFRF body with the given omega, modal masses and phi;
+- a second ball (kind "ball"): another `NodePoint` + `MassPoint` (centre at y = -R2, moving at +v2); the
+  contact (native `ObjectContactSphereSphere` or the injected spring-damper) joins the two centres;
 - a beam: an `ObjectFFRFreducedOrder` body whose floating frame is fixed to the ground by six
   `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the impact
   section's centroid (contact radius h/2, so the ball touches the top face). Two beam models,

@@ -21,6 +21,9 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
   and, at x = L, a `<connect>` pin plus a fixed tendon over all hinge angles (= the last segment's
   absolute rotation) of stiffness 2EI/l; cantilever = a 2EI/l hinge to the ground at x = 0, free end.
   The ball hits the segment that contains x = impact_at*L, at that point;
+- second ball (target kind "ball"): a free sphere of the target's mass and radius on its own slide joint
+  along z (centre at z = -R2, moving at +v2 toward the first ball); the contact spring acts on the
+  reduced mass (k0, dt auto and dt_limit from `engines.base.plate_times` / the two-ball contact);
 - modal target (contact "hertz" only): one oscillator per mode, mass m_i/phi_i^2 on a slide
   joint with stiffness (m_i/phi_i^2)*omega_i^2; the contact point moves by the sum of their
   displacements.

@@ -7,6 +7,9 @@ dt = "auto", the stability limit (refused before stepping when dt is above it) a
 Scene in Bullet (SI units; z is up, the ball moves down along -z with v0 and touches at t = 0):
 - ball: a sphere multibody of mass m0, no gravity, no damping, no friction, no restitution;
 - rigid plate: a static box whose top face is z = 0;
+- second ball (target kind "ball"): a free sphere multibody (centre at z = -R2, moving at +v2 toward the
+  first ball); injected Hertz acts on both balls, native contact is Bullet's sphere-sphere pair with the
+  two-ball k0 (reduced mass);
 - beam: the Hencky chain of `engines.chain.hencky_chain` (rotary inertia m l^2/12 of a rigid bar: the
   reference is Euler-Bernoulli) as N box links along x joined by revolute joints about y; the spring
   torques -K q (EI/l per hinge, 2EI/l per clamped end) are applied every step with TORQUE_CONTROL
