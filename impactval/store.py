@@ -102,6 +102,14 @@ def _url(where: str | Path | None) -> str:
         return "sqlite://"                                   # in memory: a run without --out
     text = str(where)
     if "://" in text:
+        scheme, rest = text.split("://", 1)
+        if scheme in ("postgresql", "postgres"):
+            # plain postgresql:// means psycopg2 to SQLAlchemy; the [postgres] extra installs psycopg 3
+            import importlib.util
+
+            if importlib.util.find_spec("psycopg2") is None and importlib.util.find_spec("psycopg") is not None:
+                return f"postgresql+psycopg://{rest}"
+            return f"postgresql://{rest}"
         return text
     p = Path(text).expanduser().resolve()
     if p.is_dir():
