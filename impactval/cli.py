@@ -12,6 +12,9 @@ from pathlib import Path
 import click
 
 from impactval.errors import ImpactvalError
+from impactval.checks import (MAX_ENGINE_MODES, MAX_SEGMENTS, check_answer, check_engine_steps, check_run_number,
+                              check_tol, check_window)
+from impactval.paths import check_output_dir, check_output_file, write_guard
 
 
 def _pm(value: float, unc: float) -> str:
@@ -22,6 +25,20 @@ def _pm(value: float, unc: float) -> str:
         return f"{value:.9g}"
     digits = max(0, min(12, 1 - math.floor(math.log10(unc))))
     return f"{value:.{digits}f} ± {unc:.1g}"
+
+
+def _json(obj) -> str:
+    """JSON with NaN/inf (diagnostics such as energy_error when not measured) as null: valid JSON."""
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        return x
+
+    return json.dumps(clean(obj), allow_nan=False)
 
 
 def _warn_if_compiling() -> None:
@@ -39,11 +56,26 @@ def _warn_if_compiling() -> None:
 
 class _Group(click.Group):
     def invoke(self, ctx):
+        import os
+
         try:
             return super().invoke(ctx)
         except ImpactvalError as err:
             click.echo(f"impactval: error: {err}", err=True)
             ctx.exit(2)
+        except (MemoryError, RecursionError) as err:
+            click.echo(f"impactval: error: the request needs more {'memory' if isinstance(err, MemoryError) else 'nesting'}"
+                       f" than this machine has ({type(err).__name__}); make it smaller (fewer modes, a shorter window).",
+                       err=True)
+            ctx.exit(2)
+        except click.exceptions.ClickException:
+            raise
+        except Exception as err:  # noqa: BLE001 - a bug: one line, the traceback on request (issue 18)
+            if os.environ.get("IMPACTVAL_DEBUG"):
+                raise
+            click.echo(f"impactval: internal error: {type(err).__name__}: {err} (a bug in impactval; please report it "
+                       f"with the command line; IMPACTVAL_DEBUG=1 shows the traceback)", err=True)
+            ctx.exit(3)
 
 
 @click.group(cls=_Group)
@@ -58,6 +90,9 @@ def scenes(tag: str | None) -> None:
     """List the built-in scene catalogue."""
     from impactval.scenarios.scene import load_catalogue
 
+    if tag is not None and not load_catalogue(tag):
+        known = sorted({t for s in load_catalogue() for t in s.tags})
+        raise ImpactvalError(f"--tag {tag!r} matches no scene; known tags: {', '.join(known)}.")
     for s in load_catalogue(tag):
         click.echo(f"{s.name:26s} {s.target.kind:12s} [{', '.join(s.tags)}]  {s.description}")
 
@@ -81,8 +116,11 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
-    if curve and len(names) != 1:
+    if curve is not None and len(names) != 1:
         raise ImpactvalError("--curve writes one scene's series: give exactly one SCENE.")
+    if curve is not None:
+        check_output_file(curve, "--curve")
+    check_tol(tol), check_window(window)
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
@@ -93,11 +131,13 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     for sc in scenes_:
         r = impactval.solve(sc, tol=tol, window=window)
         u = r.uncertainty
+        check_answer(sc.name, t_m=r.t_m, f_m=r.f_m, delta_m=r.delta_m, uncertainty_t_m=u.t_m,
+                     uncertainty_f_m=u.f_m, uncertainty_delta_m=u.delta_m)
         if as_json:
-            click.echo(json.dumps({"scene": r.scene, "t_m": r.t_m, "f_m": r.f_m, "delta_m": r.delta_m,
-                                   "uncertainty": u.as_dict(), "modes": r.modes,
-                                   "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
-                                   "contacts": [c.__dict__ for c in r.contacts]}))
+            click.echo(_json({"scene": r.scene, "t_m": r.t_m, "f_m": r.f_m, "delta_m": r.delta_m,
+                              "uncertainty": u.as_dict(), "modes": r.modes,
+                              "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
+                              "contacts": [c.__dict__ for c in r.contacts]}))
         else:
             click.echo(f"{r.scene:24s} {_pm(r.t_m * 1e6, u.t_m * 1e6):>22s} {_pm(r.f_m, u.f_m):>24s} "
                        f"{_pm(r.delta_m * 1e6, u.delta_m * 1e6):>22s} {r.modes:5d} {len(r.contacts):8d}")
@@ -105,8 +145,10 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
             import numpy as np
 
             data = np.column_stack([r.t, r.delta, r.f, r.x_ball, r.x_structure, r.energy])
-            np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
-                       comments="")
+            with write_guard("--curve", curve):
+                Path(curve).parent.mkdir(parents=True, exist_ok=True)
+                np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
+                           comments="")
         if explain and not as_json:
             _explain(sc, tol)
 
@@ -152,15 +194,18 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
             p = perturbation(sc, "hertz")
             m, u, n, label = p.metrics, None, len(p.weights.s), "hertz-first-order"
             series = perturbation_curve(sc, "hertz") if curve else None
+        check_answer(sc.name, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m)
         if as_json:
-            click.echo(json.dumps({"scene": sc.name, "model": label, "t_m": m.t_m, "f_m": m.f_m, "delta_m": m.delta_m,
+            click.echo(_json({"scene": sc.name, "model": label, "t_m": m.t_m, "f_m": m.f_m, "delta_m": m.delta_m,
                                    "uncertainty": None if u is None else u.as_dict(), "modes": n}))
         else:
             pm = (lambda x, du, k: _pm(x * k, du * k)) if u is not None else (lambda x, du, k: f"{x * k:.9g}")
             click.echo(f"{sc.name:24s} {pm(m.t_m, u.t_m if u else 0, 1e6):>22s} {pm(m.f_m, u.f_m if u else 0, 1):>24s} "
                        f"{pm(m.delta_m, u.delta_m if u else 0, 1e6):>22s} {n:5d}  {label}")
         if curve:
-            np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
+            with write_guard("--curve", curve):
+                Path(curve).parent.mkdir(parents=True, exist_ok=True)
+                np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
         if explain and not as_json:
             _explain(sc, tol)
 
@@ -179,6 +224,7 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
+    check_output_dir(out_dir, "--out"), check_tol(tol)
     scenes_ = [impactval.load_scene(n) for n in names]
     plot = not no_plot
     if plot:
@@ -191,12 +237,14 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     _warn_if_compiling()
     comparisons = []
     for sc in scenes_:
-        page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
+        with write_guard("--out", out_dir):
+            page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
         comparisons.append(cmp)
         e = cmp.model_form_error
         click.echo(f"{sc.name:24s} linear-contact model-form error: t_m {100 * e.t_m:+8.3f} %  "
                    f"f_m {100 * e.f_m:+8.3f} %  delta_m {100 * e.delta_m:+8.3f} %   -> {page}")
-    click.echo(f"index: {theory_index(comparisons, out_dir)}")
+    with write_guard("--out", out_dir):
+        click.echo(f"index: {theory_index(comparisons, out_dir)}")
 
 
 # ---------------------------------------------------------------------------- impactval run
@@ -232,7 +280,7 @@ def _parse_dts(text: str) -> list[float]:
         raise ImpactvalError(f"--dt takes time steps in s, comma-separated (e.g. 1e-6,5e-7), got {text!r}.") from None
     if not dts:
         raise ImpactvalError("--dt: give at least one time step in s.")
-    return dts
+    return [check_run_number("--dt", x) for x in dts]
 
 
 def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, options=()):
@@ -252,8 +300,10 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
               help="hertz: exact law injected; native: engine contact as the linear spring k0; "
                    "native-hertz: engine contact shaped toward Hertz.")
 @click.option("--integrator", default=None, help="Engine integrator (e.g. MuJoCo: Euler, implicitfast, RK4).")
-@click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
-@click.option("--modes", default=None, type=click.IntRange(min=1), help="Modes of a modal (FFRF) beam (default: engine's).")
+@click.option("--segments", default=None, type=click.IntRange(1, MAX_SEGMENTS),
+              help=f"Beam chain segments, 1..{MAX_SEGMENTS} (default: engine's).")
+@click.option("--modes", default=None, type=click.IntRange(1, MAX_ENGINE_MODES),
+              help=f"Modes of a modal (FFRF) beam, 1..{MAX_ENGINE_MODES} (default: engine's).")
 @click.option("--option", "options", multiple=True, metavar="[ENGINE.]KEY=VALUE",
               help="Engine-specific option, repeatable; ENGINE. limits it to one engine "
                    "(e.g. exudyn.beam_model=reference-modes, pybullet.native_route=per-body).")
@@ -279,8 +329,13 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
     dts = _parse_dts(dt)
+    check_output_dir(out, "--out"), check_tol(tol)
+    check_run_number("--timeout", timeout), check_run_number("--tail", tail)
     settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or catalogue_names()
+    import impactval
+
+    check_engine_steps([impactval.load_scene(n) for n in names], dts, float(tail))
     _warn_if_compiling()
 
     def progress(row):

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from impactval.errors import SceneError
+from impactval.scenarios import limits
 from impactval.scenarios.materials import BUILTIN_MATERIALS, Material
 
 SUPPORTS = ("simply-supported", "clamped-clamped", "cantilever")
@@ -148,9 +149,8 @@ def _where(src: str, section: str) -> str:
 
 
 def _positive(src: str, section: str, key: str, value: Any, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise SceneError(f"{_where(src, section)} {key} must be a positive finite number in {unit}, got {value!r}.")
-    return float(value)
+    """A positive finite number in its physically meaningful range (scenarios/limits.py)."""
+    return limits.check_number(src, section, key, value, unit)
 
 
 def _check_keys(src: str, section: str, table: Mapping[str, Any], required: set[str], optional: set[str]) -> None:
@@ -171,11 +171,10 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
     if not isinstance(extra, Mapping):
         raise SceneError(f"{src}: [materials] must be a table of [materials.NAME] tables.")
     for name, table in extra.items():
+        limits.check_name(src, "material name", name, "materials")
         sect = f"materials.{name}"
         _check_keys(src, sect, table, {"young", "poisson", "density"}, set())
-        nu = table["poisson"]
-        if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
-            raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
+        nu = limits.check_number(src, sect, "poisson", table["poisson"], positive=False)
         mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
                               _positive(src, sect, "density", table["density"], "kg/m^3"))
     return mats
@@ -189,14 +188,7 @@ def _material(src: str, section: str, value: Any, mats: Mapping[str, Material]) 
 
 
 def _float_list(src: str, key: str, value: Any) -> tuple[float, ...]:
-    if not isinstance(value, list) or not value:
-        raise SceneError(f"{src}: [target] {key} must be a non-empty list of numbers, got {value!r}.")
-    out = []
-    for i, v in enumerate(value):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise SceneError(f"{src}: [target] {key}[{i}] must be a finite number, got {v!r}.")
-        out.append(float(v))
-    return tuple(out)
+    return limits.check_list(src, key, value)
 
 
 def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_name: str = "scene") -> Scene:
@@ -212,6 +204,8 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     velocity = _positive(src, "ball", "velocity", b["velocity"], "m/s")
     mass = (_positive(src, "ball", "mass", b["mass"], "kg") if "mass" in b
             else bmat.density * 4.0 / 3.0 * math.pi * radius**3)
+    if "mass" not in b:
+        _positive(src, "ball", "mass", mass, "kg")        # density x volume must be in range too
     ball = Ball(radius, velocity, bmat, mass)
 
     t = doc["target"]
@@ -231,16 +225,15 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
             raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
                              f"got {t['support']!r}.")
         at = t["impact_at"]
-        if isinstance(at, bool) or not isinstance(at, (int, float)) or not math.isfinite(at) or not 0.0 < at <= 1.0:
+        if not limits.is_real(at) or not math.isfinite(at) or not 0.0 < at <= 1.0:
             raise SceneError(f"{src}: [target] impact_at must be a fraction of the length in (0, 1] "
                              f"(0 < impact_at < 1 for a beam supported at both ends), got {at!r}.")
         if at >= 1.0 and t["support"] != "cantilever":
             raise SceneError(f"{src}: [target] impact_at = {at!r} is on a support of a {t['support']} beam; "
                              f"use a value strictly between 0 and 1.")
         modes = t.get("modes")
-        if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 100000):
-            raise SceneError(f"{src}: [target] modes must be a whole number from 1 to 100000 (or omitted for an "
-                             f"automatic choice), got {modes!r}.")
+        if modes is not None:
+            limits.check_count(src, "target", "modes", modes)
         target = Beam(_material(src, "target", t["material"], mats), t["support"],
                       _positive(src, "target", "length", t["length"], "m"),
                       _positive(src, "target", "width", t["width"], "m"),
@@ -259,16 +252,12 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
                 raise SceneError(f"{src}: [target] {key} values must be positive, got {bad[0]!r}.")
         target = ModalTarget(_material(src, "target", t["material"], mats), omega, mm, phi)
 
-    name = doc.get("name", default_name)
-    if not isinstance(name, str) or not name:
-        raise SceneError(f"{src}: name must be a non-empty string, got {name!r}.")
-    desc = doc.get("description", "")
-    if not isinstance(desc, str):
-        raise SceneError(f"{src}: description must be a string, got {desc!r}.")
-    tags = doc.get("tags", [])
-    if not isinstance(tags, list) or not all(isinstance(x, str) for x in tags):
-        raise SceneError(f"{src}: tags must be a list of strings, got {tags!r}.")
-    return Scene(name, ball, target, desc, tuple(tags), source)
+    name = limits.check_name(src, "name", doc.get("name", limits.safe_name(default_name)))
+    desc = limits.check_description(src, doc.get("description", ""))
+    tags = limits.check_tags(src, doc.get("tags", []))
+    scene = Scene(name, ball, target, desc, tags, source)
+    limits.check_scene(scene, src)
+    return scene
 
 
 def catalogue_names() -> list[str]:
@@ -277,21 +266,38 @@ def catalogue_names() -> list[str]:
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
-    """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path."""
+    """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path.
+
+    A Scene is returned as it is, after checking its fields (Python-built scenes obey the same limits).
+    """
+    if hasattr(name_or_path, "ball") and hasattr(name_or_path, "target"):
+        limits.check_scene_fields(name_or_path)
+        return name_or_path
+    if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
+        raise SceneError(f"a scene is a Scene, a catalogue name (see `impactval scenes`) or a path to a .toml scene "
+                         f"file, got {name_or_path!r}.")
     text_name = str(name_or_path)
+    if "\x00" in text_name or len(text_name) > 4096:
+        raise SceneError(f"a scene is a catalogue name or a path to a .toml scene file, got "
+                         f"{text_name[:80]!r}{'...' if len(text_name) > 80 else ''} (a NUL character or too long).")
     path = Path(text_name)
-    if not (text_name.endswith(".toml") or path.exists()):
-        cand = CATALOGUE_DIR / f"{text_name}.toml"
-        if not cand.exists():
-            raise SceneError(f"no scene named {text_name!r}: not a file and not in the catalogue "
-                             f"(known: {', '.join(catalogue_names())}).")
-        path = cand
-    if not path.is_file():
-        raise SceneError(f"{path}: file does not exist (give a catalogue name or a path to a .toml scene file).")
     try:
-        doc = tomllib.loads(path.read_text())
+        if not (text_name.endswith(".toml") or path.exists()):
+            cand = CATALOGUE_DIR / f"{text_name}.toml"
+            if not limits.NAME_RE.fullmatch(text_name) or not cand.exists():
+                raise SceneError(f"no scene named {text_name[:80]!r}: not a file and not in the catalogue "
+                                 f"(known: {', '.join(catalogue_names())}).")
+            path = cand
+        if not path.is_file():
+            what = ("is a directory" if path.is_dir() else "is not a regular file" if path.exists()
+                    else "file does not exist")
+            raise SceneError(f"{path}: {what} (give a catalogue name or a path to a .toml scene file).")
+        text = path.read_text(encoding="utf-8")
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{path}: malformed TOML: {err}.") from None
+    except RecursionError:
+        raise SceneError(f"{path}: malformed TOML: nested too deeply.") from None
     except (OSError, UnicodeDecodeError) as err:
         raise SceneError(f"{path}: cannot read the file: {err}.") from None
     return scene_from_dict(doc, source=str(path), default_name=path.stem)

@@ -1,0 +1,289 @@
+"""Physically meaningful ranges of the scene fields, checked before any arithmetic (issue 18).
+
+One table, `LIMITS`, gives for every number of a scene file its allowed range, unit and the reason
+for it; the loader (`scenarios/scene.py`) and the Python API (`check_scene`) check against it, and
+the README's scene-file section lists it. Outside these ranges the physics the reference solves
+(quasi-static Hertz contact of continuum bodies, small strain, linear-elastic structure) does not
+hold, or the numbers cannot be represented: the value is refused with the field, the range and a fix,
+never computed into an inf or NaN. Cross-field checks (`check_scene`) refuse what each field allows
+alone but the whole does not, e.g. an approach delta_m that is not small against the radius.
+
+Strings that reach generated files (MuJoCo XML, URDF, CSV, markdown, HTML, file names) are limited
+to a safe set (`NAME_RE`) or refused; free text (descriptions) must be one printable line.
+
+New fields (new target kinds) add one `LIMITS` row; a field without a row gets the plain
+"positive finite number" check.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import re
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+from impactval.errors import SceneError
+
+
+@dataclass(frozen=True)
+class Limit:
+    """Allowed values `low`..`high` (inclusive unless `open_low`/`open_high`) in `unit`, and why."""
+
+    low: float
+    high: float
+    unit: str
+    reason: str
+    open_low: bool = False
+    open_high: bool = False
+
+    def contains(self, x: float) -> bool:
+        above = x > self.low if self.open_low else x >= self.low
+        below = x < self.high if self.open_high else x <= self.high
+        return above and below
+
+    def describe(self) -> str:
+        lo, hi = ("(" if self.open_low else "["), (")" if self.open_high else "]")
+        unit = "" if self.unit == "-" else f" {self.unit}"
+        return f"{lo}{self.low:g}, {self.high:g}{hi}{unit}"
+
+
+#: "section.key" -> Limit. Section "materials" covers every [materials.NAME] table.
+LIMITS: dict[str, Limit] = {
+    "ball.radius": Limit(1e-6, 10.0, "m", "a continuum Hertz ball: from 1 um (below, surface forces and "
+                         "roughness dominate) to 10 m"),
+    "ball.velocity": Limit(1e-6, 1e3, "m/s", "quasi-static elastic impact: from 1 um/s (slower, the approach "
+                           "is sub-atomic) to 1 km/s, well below the sound speed of solids (3-6 km/s)"),
+    "ball.mass": Limit(1e-15, 1e8, "kg", "from a 1 um ball (~1e-15 kg) to a 10 m steel ball (~3e7 kg); "
+                       "given, or density x volume"),
+    "materials.young": Limit(1e4, 2e12, "Pa", "from soft gels (~10 kPa) to diamond (1.2 TPa)"),
+    "materials.poisson": Limit(-1.0, 0.5, "-", "thermodynamic bounds of an isotropic solid; 0.5 "
+                               "(incompressible) makes the contact modulus singular", open_low=True, open_high=True),
+    "materials.density": Limit(1.0, 3e4, "kg/m^3", "from aerogels (~1) to osmium (22 600)"),
+    "target.length": Limit(1e-5, 1e3, "m", "a beam from 10 um (MEMS) to 1 km"),
+    "target.width": Limit(1e-6, 10.0, "m", "a beam section from 1 um to 10 m"),
+    "target.height": Limit(1e-6, 10.0, "m", "a beam section from 1 um to 10 m"),
+    "target.impact_at": Limit(0.0, 1.0, "-", "a fraction of the length from x = 0", open_low=True),
+    "target.omega": Limit(1e-2, 1e10, "rad/s", "structure modes from a 10 min period (slower, a free mass) "
+                          "to 1e10 rad/s (above, no continuum mode)"),
+    "target.modal_mass": Limit(1e-12, 1e9, "kg", "modal masses from 1 ng to 1e6 t"),
+    "target.phi": Limit(-1.0, 1.0, "-", "shapes are max-normalised (|shape| <= 1 everywhere); rescale "
+                        "phi by 1/max|shape| and modal_mass by max|shape|^2"),
+}
+#: the largest mode count of a beam or modal target (memory and time of the modal sums stay bounded)
+MAX_MODES = 100_000
+#: approach at the peak over ball radius above which Hertz's small-strain theory is refused
+MAX_APPROACH_OVER_RADIUS = 0.1
+#: names and tags: ASCII letters, digits, "_", "-", "." (not first), at most 64 characters; they become
+#: file names, XML attributes, CSV cells and markdown table cells, where anything else needs escaping
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+#: the longest description (one printable line)
+MAX_DESCRIPTION = 500
+
+
+def _where(src: str, section: str) -> str:
+    return f"{src}: [{section}]" if section else f"{src}:"
+
+
+def limit_for(section: str, key: str) -> Limit | None:
+    """The LIMITS row of `key` in `section` ("materials.NAME" counts as "materials")."""
+    head = section.split(".", 1)[0] if section.startswith("materials") else section
+    return LIMITS.get(f"{head}.{key}")
+
+
+def is_real(value: Any) -> bool:
+    """A real number (int, float, numpy scalar), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and not (
+        hasattr(value, "dtype") and value.dtype.kind == "b")
+
+
+def check_number(src: str, section: str, key: str, value: Any, unit: str = "", *, positive: bool = True) -> float:
+    """`value` as a float, checked against `LIMITS` (or, without a row, positive and finite).
+
+    Comparisons run before any arithmetic, and integers too large for a float are refused, not
+    converted (int("1" + 400 zeros) would raise OverflowError).
+    """
+    lim = limit_for(section, key)
+    unit = lim.unit if lim else unit
+    unit_s = "" if unit in ("", "-") else f" in {unit}"
+    kind = ("positive finite number" if (lim.low >= 0 if lim else positive) else "finite number")
+    if lim is None:
+        wanted = f"{kind}{unit_s}"
+    else:
+        wanted = f"{kind} in {lim.describe()} ({lim.reason})"
+    x = math.nan
+    if is_real(value):
+        if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:
+            x = math.copysign(math.inf, int(value))      # float(int) would raise OverflowError
+        else:
+            x = float(value)
+    ok = math.isfinite(x) and (lim.contains(x) if lim else (x > 0 or not positive))
+    if not ok:
+        shown = repr(value) if len(repr(value)) <= 80 else repr(value)[:80] + "..."
+        raise SceneError(f"{_where(src, section)} {key} must be a {wanted}, got {shown}.")
+    return x
+
+
+def check_count(src: str, section: str, key: str, value: Any, what: str = "modes") -> int:
+    """A whole count from 1 to MAX_MODES."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= MAX_MODES:
+        raise SceneError(f"{_where(src, section)} {key} must be a whole number from 1 to {MAX_MODES} "
+                         f"(the number of {what}; or omitted for an automatic choice), got {value!r}.")
+    return int(value)
+
+
+def check_name(src: str, key: str, value: Any, section: str = "") -> str:
+    """A scene name, tag or material name from the safe set `NAME_RE`."""
+    if not isinstance(value, str) or not NAME_RE.fullmatch(value):
+        shown = repr(value) if not isinstance(value, str) or len(value) <= 80 else repr(value[:80]) + "..."
+        raise SceneError(f"{_where(src, section)} {key} must be 1-64 ASCII letters, digits, '_', '-' or '.' "
+                         f"(not starting with '.' or '-'; it becomes a file name and a cell of the reports), "
+                         f"got {shown}.")
+    return value
+
+
+def safe_name(text: str) -> str:
+    """`text` mapped into the safe set (for names taken from file stems): other characters become '_'."""
+    out = re.sub(r"[^A-Za-z0-9_.\-]+", "_", text).lstrip(".-")[:64]
+    return out or "scene"
+
+
+def check_description(src: str, value: Any) -> str:
+    """Free text shown in listings and reports: one printable line of at most MAX_DESCRIPTION characters."""
+    if not isinstance(value, str):
+        raise SceneError(f"{src}: description must be a string, got {value!r}.")
+    if len(value) > MAX_DESCRIPTION or not value.isprintable():
+        why = (f"{len(value)} characters" if len(value) > MAX_DESCRIPTION
+               else f"control character {next(c for c in value if not c.isprintable())!r}")
+        raise SceneError(f"{src}: description must be one printable line of at most {MAX_DESCRIPTION} characters "
+                         f"(no newlines or control characters), got {why}.")
+    return value
+
+
+def check_tags(src: str, value: Any) -> tuple[str, ...]:
+    """A list of tags, each from the safe set."""
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(f"{src}: tags must be a list of strings (e.g. tags = [\"beam\"]), got {value!r}.")
+    return tuple(check_name(src, f"tags[{i}]", t) for i, t in enumerate(value))
+
+
+# ----------------------------------------------------------------------------- a Scene as a whole
+
+def _check_material(src: str, where: str, mat: Any) -> None:
+    for key in ("young", "poisson", "density"):
+        if not hasattr(mat, key):
+            raise SceneError(f"{src}: {where} material must be a Material (young, poisson, density), got {mat!r}.")
+        check_number(src, f"materials.{getattr(mat, 'name', '?')}", key, getattr(mat, key))
+    check_name(src, "name", getattr(mat, "name", None), f"materials.{getattr(mat, 'name', '?')}")
+
+
+def check_scene_fields(scene: Any, src: str | None = None) -> None:
+    """Every field of a Scene built or changed in Python against the same limits as a scene file."""
+    src = src or getattr(scene, "source", "") or f"scene {getattr(scene, 'name', '?')!r}"
+    if not all(hasattr(scene, a) for a in ("name", "ball", "target")):
+        raise SceneError(f"scene must be a Scene (from impactval.load_scene), got {type(scene).__name__}.")
+    check_name(src, "name", scene.name)
+    check_tags(src, getattr(scene, "tags", ()))
+    check_description(src, getattr(scene, "description", ""))
+    ball = scene.ball
+    if not all(hasattr(ball, a) for a in ("radius", "velocity", "mass", "material")):
+        raise SceneError(f"{src}: ball must be a Ball (radius, velocity, material, mass), got {ball!r}.")
+    for key in ("radius", "velocity", "mass"):
+        check_number(src, "ball", key, getattr(ball, key))
+    _check_material(src, "[ball]", ball.material)
+    target = scene.target
+    if not hasattr(target, "kind") or not hasattr(target, "material"):
+        raise SceneError(f"{src}: target must be a target object (RigidPlate, Beam, ModalTarget), got {target!r}.")
+    _check_material(src, "[target]", target.material)
+    from impactval.scenarios.scene import SUPPORTS, TARGET_KINDS     # lazy: scene.py imports this module
+
+    if target.kind not in TARGET_KINDS:
+        raise SceneError(f"{src}: [target] kind must be one of {', '.join(map(repr, TARGET_KINDS))}, "
+                         f"got {target.kind!r}.")
+    if hasattr(target, "support") and target.support not in SUPPORTS:
+        raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
+                         f"got {target.support!r}.")
+    lists = [k for k in ("omega", "modal_mass", "phi") if hasattr(target, k)]
+    for k in lists:
+        if not isinstance(getattr(target, k), (tuple, list)):
+            raise SceneError(f"{src}: [target] {k} must be a tuple of numbers, got {getattr(target, k)!r}.")
+    if lists and len({len(getattr(target, k)) for k in lists}) > 1:
+        raise SceneError(f"{src}: [target] {', '.join(lists)} must have equal lengths, got "
+                         f"{', '.join(str(len(getattr(target, k))) for k in lists)}.")
+    fields = getattr(target, "__dataclass_fields__", {})
+    for key in fields:
+        value = getattr(target, key)
+        if key == "modes" and value is not None:
+            check_count(src, "target", key, value)
+        elif limit_for("target", key) is not None:
+            if isinstance(value, (tuple, list)):
+                _check_list(src, key, value, positive=key != "phi")
+            else:
+                check_number(src, "target", key, value)
+    check_scene(scene, src)
+
+
+def _check_list(src: str, key: str, values: Iterable[Any], positive: bool = True) -> tuple[float, ...]:
+    values = list(values)
+    if not values:
+        raise SceneError(f"{src}: [target] {key} must be a non-empty list of numbers, got [].")
+    if len(values) > MAX_MODES:
+        raise SceneError(f"{src}: [target] {key} has {len(values)} entries; at most {MAX_MODES} modes are allowed.")
+    out = []
+    for i, v in enumerate(values):
+        try:
+            out.append(check_number(src, "target", key, v, positive=positive))
+        except SceneError as err:
+            raise SceneError(str(err).replace(f"[target] {key} ", f"[target] {key}[{i}] ", 1)) from None
+    return tuple(out)
+
+
+def check_list(src: str, key: str, values: Any) -> tuple[float, ...]:
+    """A modal list (omega, modal_mass, phi): non-empty, at most MAX_MODES numbers, each in its range."""
+    if not isinstance(values, (list, tuple)):
+        raise SceneError(f"{src}: [target] {key} must be a non-empty list of numbers, got {values!r}.")
+    return _check_list(src, key, values, positive=key != "phi")
+
+
+def check_scene(scene: Any, src: str) -> None:
+    """Cross-field checks, after every field is in its range (so nothing here overflows).
+
+    The peak approach on a rigid face, delta_m = (5 m v0^2 / (4 alpha))^(2/5), must stay small against
+    the radius: Hertz theory assumes a contact radius sqrt(R delta) much smaller than R.
+    """
+    ball = scene.ball
+    try:
+        alpha = float(scene.alpha)
+    except (ArithmeticError, ValueError) as err:
+        raise SceneError(f"{src}: the Hertz coefficient cannot be computed from the materials: {err}.") from None
+    if not (math.isfinite(alpha) and alpha > 0):
+        raise SceneError(f"{src}: the Hertz coefficient alpha = {alpha!r} N/m^1.5 is not a positive finite number; "
+                         f"check the materials' young and poisson.")
+    # log space: no overflow whatever the inputs
+    log_delta = 0.4 * (math.log(5.0 / 4.0) + math.log(ball.mass) + 2.0 * math.log(ball.velocity) - math.log(alpha))
+    ratio = math.exp(min(log_delta - math.log(ball.radius), 50.0))
+    if ratio > MAX_APPROACH_OVER_RADIUS:
+        raise SceneError(
+            f"{src}: [ball] the Hertz approach at the peak would be {ratio:.3g} x the radius (delta_m = "
+            f"{ratio * ball.radius:.3g} m for mass {ball.mass:g} kg, velocity {ball.velocity:g} m/s, radius "
+            f"{ball.radius:g} m); Hertz contact needs it below {MAX_APPROACH_OVER_RADIUS:g} x the radius: lower the "
+            f"velocity or the mass, or use a stiffer material.")
+
+
+def check_answer(scene_name: str, **values: float) -> None:
+    """Refuse to print a non-finite answer: each named value must be a finite number."""
+    for key, v in values.items():
+        if v is None or not math.isfinite(float(v)):
+            raise SceneError(f"scene {scene_name!r}: the solution's {key} is {v!r}, not a finite number: the scene is "
+                             f"outside what the solver handles; check its numbers against the ranges in the README "
+                             f"(scene files).")
+
+
+def limits_table() -> str:
+    """The LIMITS table in markdown (for the README)."""
+    rows = ["| field | allowed | why |", "|---|---|---|"]
+    for key, lim in LIMITS.items():
+        rows.append(f"| `{key}` | {lim.describe()} | {lim.reason} |")
+    rows.append(f"| `target.modes`, modal list length | 1 .. {MAX_MODES} | memory and time of the modal sums |")
+    rows.append(f"| delta_m / `ball.radius` | <= {MAX_APPROACH_OVER_RADIUS:g} | Hertz: small contact "
+                "radius against the ball radius |")
+    return "\n".join(rows)
