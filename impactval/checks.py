@@ -33,7 +33,7 @@ def _as_float(value: Any) -> float:
     if not is_real(value):
         return math.nan
     if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:
-        return math.copysign(math.inf, int(value))
+        return math.inf if value > 0 else -math.inf
     return float(value)
 
 

@@ -103,7 +103,7 @@ def scenes(tag: str | None) -> None:
 @click.option("--window", default=0.0, show_default=True, type=float,
               help="Time [s] to follow after the first contact ends (re-contacts).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per scene (SI units).")
-@click.option("--curve", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--curve", type=str, default=None,
               help="Write the time series (t, delta, f, x_ball, x_structure, energy) to this CSV file.")
 @click.option("--model", type=click.Choice(["nonlinear", "linear", "perturbation"]), default="nonlinear",
               show_default=True, help="Hertz contact (exact), linear contact k0 (exact) or first-order perturbation.")
@@ -212,7 +212,7 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
 
 @main.command()
 @click.argument("scene", nargs=-1)
-@click.option("--out", "out_dir", default="theory-report", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out_dir", default="theory-report", show_default=True, type=str,
               help="Directory for the markdown pages and PNG plots.")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Relative tolerance of the exact solvers.")
 @click.option("--no-plot", is_flag=True, help="Skip the PNG plots (no matplotlib needed).")
@@ -311,7 +311,7 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.option("--tail", default=0.0, show_default=True, type=float,
               help="Simulated time [s] after the first contact ends (re-contacts).")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
-@click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out", default="impactval-results", show_default=True, type=str,
               help="Directory for results.csv (rows appended as they finish) and report.md.")
 @click.option("--baseline", default=None, type=click.Path(dir_okay=False),
               help="results.csv of an earlier run: mark rows worse (+), better (-), newly failing (!), fixed (*).")

@@ -66,13 +66,17 @@ LIMITS: dict[str, Limit] = {
     "target.omega": Limit(1e-2, 1e10, "rad/s", "structure modes from a 10 min period (slower, a free mass) "
                           "to 1e10 rad/s (above, no continuum mode)"),
     "target.modal_mass": Limit(1e-12, 1e9, "kg", "modal masses from 1 ng to 1e6 t"),
-    "target.phi": Limit(-1.0, 1.0, "-", "shapes are max-normalised (|shape| <= 1 everywhere); rescale "
-                        "phi by 1/max|shape| and modal_mass by max|shape|^2"),
+    "target.phi": Limit(-1.0, 1.0, "-", "shapes are max-normalised (abs(shape) <= 1 everywhere); rescale "
+                        "phi by 1/max abs(shape) and modal_mass by max abs(shape)^2"),
 }
 #: the largest mode count of a beam or modal target (memory and time of the modal sums stay bounded)
 MAX_MODES = 100_000
 #: approach at the peak over ball radius above which Hertz's small-strain theory is refused
 MAX_APPROACH_OVER_RADIUS = 0.1
+#: beam proportions: length over height and width, and width over height (outside: a string, a
+#: plate or a block, not a beam; and the mode count to converge grows without bound)
+MAX_SLENDERNESS = 1000.0
+MAX_SECTION_ASPECT = 100.0
 #: names and tags: ASCII letters, digits, "_", "-", "." (not first), at most 64 characters; they become
 #: file names, XML attributes, CSV cells and markdown table cells, where anything else needs escaping
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
@@ -113,7 +117,7 @@ def check_number(src: str, section: str, key: str, value: Any, unit: str = "", *
     x = math.nan
     if is_real(value):
         if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:
-            x = math.copysign(math.inf, int(value))      # float(int) would raise OverflowError
+            x = math.inf if value > 0 else -math.inf     # float(int) would raise OverflowError
         else:
             x = float(value)
     ok = math.isfinite(x) and (lim.contains(x) if lim else (x > 0 or not positive))
@@ -267,6 +271,26 @@ def check_scene(scene: Any, src: str) -> None:
             f"{ratio * ball.radius:.3g} m for mass {ball.mass:g} kg, velocity {ball.velocity:g} m/s, radius "
             f"{ball.radius:g} m); Hertz contact needs it below {MAX_APPROACH_OVER_RADIUS:g} x the radius: lower the "
             f"velocity or the mass, or use a stiffer material.")
+    target = scene.target
+    if all(hasattr(target, k) for k in ("length", "width", "height")):
+        _check_beam_shape(src, target, ball.radius, ratio * ball.radius)
+
+
+def _check_beam_shape(src: str, beam: Any, radius: float, delta_m: float) -> None:
+    """A beam is slender but not a string, its section not a plate, and the contact patch fits on it."""
+    length, width, height = beam.length, beam.width, beam.height
+    for what, r in (("length / height", length / height), ("length / width", length / width)):
+        if r > MAX_SLENDERNESS:
+            raise SceneError(f"{src}: [target] {what} = {r:.3g} is above {MAX_SLENDERNESS:g}: a string or a wire, not a "
+                             f"beam (its modes converge too slowly to solve); use a shorter or thicker beam.")
+    if not 1.0 / MAX_SECTION_ASPECT <= width / height <= MAX_SECTION_ASPECT:
+        raise SceneError(f"{src}: [target] width / height = {width / height:.3g} is outside [{1 / MAX_SECTION_ASPECT:g}, "
+                         f"{MAX_SECTION_ASPECT:g}]: a plate or a blade, not a beam.")
+    patch = math.sqrt(radius * delta_m)
+    if patch > 0.5 * width:
+        raise SceneError(f"{src}: [target] the Hertz contact patch (radius sqrt(R delta_m) = {patch:.3g} m) is wider "
+                         f"than the beam (width {width:g} m): the face is not locally flat; use a wider beam or a "
+                         f"smaller ball.")
 
 
 def check_answer(scene_name: str, **values: float) -> None:
@@ -286,4 +310,8 @@ def limits_table() -> str:
     rows.append(f"| `target.modes`, modal list length | 1 .. {MAX_MODES} | memory and time of the modal sums |")
     rows.append(f"| delta_m / `ball.radius` | <= {MAX_APPROACH_OVER_RADIUS:g} | Hertz: small contact "
                 "radius against the ball radius |")
+    rows.append(f"| beam `length/height`, `length/width` | <= {MAX_SLENDERNESS:g} | a beam, not a string "
+                "(modes converge) |")
+    rows.append(f"| beam `width/height` | {1 / MAX_SECTION_ASPECT:g} .. {MAX_SECTION_ASPECT:g} | a beam, not a plate |")
+    rows.append("| contact patch sqrt(R delta_m) | <= width / 2 | the patch fits on the beam's face |")
     return "\n".join(rows)
