@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -56,8 +57,6 @@ def _warn_if_compiling() -> None:
 
 class _Group(click.Group):
     def invoke(self, ctx):
-        import os
-
         try:
             return super().invoke(ctx)
         except ImpactvalError as err:
@@ -120,7 +119,8 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
         raise ImpactvalError("--curve writes one scene's series: give exactly one SCENE.")
     if curve is not None:
         check_output_file(curve, "--curve")
-    check_tol(tol), check_window(window)
+    check_tol(tol)
+    check_window(window)
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
@@ -197,7 +197,7 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
         check_answer(sc.name, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m)
         if as_json:
             click.echo(_json({"scene": sc.name, "model": label, "t_m": m.t_m, "f_m": m.f_m, "delta_m": m.delta_m,
-                                   "uncertainty": None if u is None else u.as_dict(), "modes": n}))
+                              "uncertainty": None if u is None else u.as_dict(), "modes": n}))
         else:
             pm = (lambda x, du, k: _pm(x * k, du * k)) if u is not None else (lambda x, du, k: f"{x * k:.9g}")
             click.echo(f"{sc.name:24s} {pm(m.t_m, u.t_m if u else 0, 1e6):>22s} {pm(m.f_m, u.f_m if u else 0, 1):>24s} "
@@ -224,7 +224,8 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
-    check_output_dir(out_dir, "--out"), check_tol(tol)
+    check_output_dir(out_dir, "--out")
+    check_tol(tol)
     scenes_ = [impactval.load_scene(n) for n in names]
     plot = not no_plot
     if plot:
@@ -329,8 +330,10 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
     dts = _parse_dts(dt)
-    check_output_dir(out, "--out"), check_tol(tol)
-    check_run_number("--timeout", timeout), check_run_number("--tail", tail)
+    check_output_dir(out, "--out")
+    check_tol(tol)
+    check_run_number("--timeout", timeout)
+    check_run_number("--tail", tail)
     settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or catalogue_names()
     import impactval

@@ -316,3 +316,24 @@ def test_limits_table_is_in_the_readme():
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     for key, lim in limits.LIMITS.items():
         assert f"| `{key}` | {lim.describe()} |" in readme, key
+
+
+def test_run_refuses_a_job_too_long_for_any_engine_with_the_estimate(tmp_path):
+    """--dt 1e-12 on the plate (contact 6.9e-5 s) would take ~7e7 steps: refused before any job."""
+    res = invoke(["run", "plate_steel", "--dt", "1e-12", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2 and "--dt" in res.output and "6.89e+07 engine steps" in res.output, res.output
+    assert not (tmp_path / "r").exists()
+
+
+def test_path_checks_leave_nothing_behind(tmp_path):
+    from impactval.paths import check_output_dir, check_output_file
+
+    check_output_dir(tmp_path / "a" / "b", "--out")
+    check_output_file(tmp_path / "c" / "d.csv", "--curve")
+    check_output_dir(tmp_path, "--out")
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ImpactvalError, match="--out .* is an existing file"):
+        (tmp_path / "f").write_text("x")
+        check_output_dir(tmp_path / "f", "--out")
+    with pytest.raises(ImpactvalError, match="--curve .* is under .*which is a file"):
+        check_output_file(tmp_path / "f" / "x.csv", "--curve")
