@@ -23,7 +23,7 @@ MAX_ENGINE_STEPS = 5e6
 
 #: name -> (low, high, unit, what); low/high inclusive; used by check_run_number
 RUN_LIMITS: dict[str, tuple[float, float, str, str]] = {
-    "--dt": (1e-12, 1.0, "s", "an engine time step"),
+    "--dt": (1e-12, 1e-2, "s", "an engine time step"),
     "--timeout": (1e-3, 1e6, "s", "a time limit per engine job"),
     "--tail": (0.0, 1e3, "s", "simulated time after the first contact ends"),
 }

@@ -67,6 +67,9 @@ class _Group(click.Group):
                        f" than this machine has ({type(err).__name__}); make it smaller (fewer modes, a shorter window).",
                        err=True)
             ctx.exit(2)
+        except BrokenPipeError:       # the reader went away (`impactval scenes | head -1`): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            ctx.exit(0)
         except click.exceptions.ClickException:
             raise
         except Exception as err:  # noqa: BLE001 - a bug: one line, the traceback on request (issue 18)
