@@ -272,7 +272,7 @@ def check_scene(scene: Any, src: str) -> None:
             f"{ball.radius:g} m); Hertz contact needs it below {MAX_APPROACH_OVER_RADIUS:g} x the radius: lower the "
             f"velocity or the mass, or use a stiffer material.")
     target = scene.target
-    if all(hasattr(target, k) for k in ("length", "width", "height")):
+    if "beam" in str(getattr(target, "kind", "")) and all(hasattr(target, k) for k in ("length", "width", "height")):
         _check_beam_shape(src, target, ball.radius, ratio * ball.radius)
 
 
