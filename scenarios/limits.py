@@ -286,6 +286,13 @@ def _check_beam_shape(src: str, beam: Any, radius: float, delta_m: float) -> Non
     if not 1.0 / MAX_SECTION_ASPECT <= width / height <= MAX_SECTION_ASPECT:
         raise SceneError(f"{src}: [target] width / height = {width / height:.3g} is outside [{1 / MAX_SECTION_ASPECT:g}, "
                          f"{MAX_SECTION_ASPECT:g}]: a plate or a blade, not a beam.")
+    x = beam.impact_at * length
+    ends = (x,) if getattr(beam, "support", "") == "cantilever" else (x, length - x)
+    if min(ends) < height:
+        raise SceneError(f"{src}: [target] impact_at = {beam.impact_at!r} is {min(ends):.3g} m from a support, closer "
+                         f"than the beam's height ({height:g} m): beam theory does not hold there (the support "
+                         f"carries the impact); use impact_at between {height / length:.3g} and "
+                         f"{1 - height / length:.3g}.")
     patch = math.sqrt(radius * delta_m)
     if patch > 0.5 * width:
         raise SceneError(f"{src}: [target] the Hertz contact patch (radius sqrt(R delta_m) = {patch:.3g} m) is wider "
@@ -314,4 +321,5 @@ def limits_table() -> str:
                 "(modes converge) |")
     rows.append(f"| beam `width/height` | {1 / MAX_SECTION_ASPECT:g} .. {MAX_SECTION_ASPECT:g} | a beam, not a plate |")
     rows.append("| contact patch sqrt(R delta_m) | <= width / 2 | the patch fits on the beam's face |")
+    rows.append("| impact point's distance to a support | >= height | beam theory holds there |")
     return "\n".join(rows)
