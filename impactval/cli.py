@@ -315,20 +315,34 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.option("--tail", default=0.0, show_default=True, type=float,
               help="Simulated time [s] after the first contact ends (re-contacts).")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
+@click.option("--tag", default=None, help="Also run the catalogue scenes carrying this tag (see `impactval scenes`).")
 @click.option("--out", "out", default="impactval-results", show_default=True, type=str,
-              help="Directory for results.csv (rows appended as they finish) and report.md.")
+              help="Directory for the exports (results.csv, frequencies.csv, results.parquet) and report.md.")
+@click.option("--store", "store", default=None, metavar="PATH|URL",
+              help="Result store: an SQLite file or a database URL (postgresql://...)  [default: OUT/impactval.sqlite]")
+@click.option("-j", "--jobs", "jobs", default=None, type=click.IntRange(min=1),
+              help="Engine jobs run at once on this machine  [default: number of cores]")
+@click.option("--scheduler", default=None, metavar="ADDR",
+              help="Run the engine jobs on a Dask distributed scheduler (tcp://host:8786); needs impactval[dask].")
+@click.option("--force", is_flag=True, help="Recompute jobs already in the store (default: reuse them).")
+@click.option("--keep-series", is_flag=True, help="Also store each job's time series (compressed) in the store.")
+@click.option("--json", "as_json", is_flag=True, help="Print the rows as JSON lines (SI units, errors as fractions).")
 @click.option("--baseline", default=None, type=click.Path(dir_okay=False),
               help="results.csv of an earlier run: mark rows worse (+), better (-), newly failing (!), fixed (*).")
 @click.option("--threshold", default=0.2, show_default=True, type=float,
               help="Relative change of a row's largest error that counts as worse or better.")
-def run_command(scene, engines, dt, contact, integrator, segments, modes, options, timeout, tail, tol, out,
-                baseline, threshold) -> None:
-    """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none = whole catalogue).
+def run_command(scene, engines, dt, contact, integrator, segments, modes, options, timeout, tail, tol, tag, out,
+                store, jobs, scheduler, force, keep_series, as_json, baseline, threshold) -> None:
+    """Run the reference and ENGINES on SCENE (catalogue names or TOML paths; none and no --tag = whole catalogue).
 
-    Prints relative errors in % (engine - reference) / reference and wall times. Exit code 0, or 1
-    when a row crashed, timed out, went unstable or found no contact, or (with --baseline) got worse.
+    Every job is stored in the result store as it finishes; a rerun reuses stored jobs (--force
+    recomputes). Prints relative errors in % (engine - reference) / reference and wall times.
+    Exit code 0; 1 when a row crashed, timed out, went unstable or found no contact, or (with
+    --baseline) got worse; 2 bad input; 130 / 143 interrupted (Ctrl-C / SIGTERM: the finished jobs
+    are stored and reported).
     """
-    from impactval.runner import any_failed, resolve_engine, run, text_table
+    from impactval.progress import make_progress
+    from impactval.runner import RunInterrupted, any_failed, resolve_engine, run, text_table
     from impactval.scenarios.scene import catalogue_names
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
@@ -338,18 +352,27 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     check_run_number("--timeout", timeout)
     check_run_number("--tail", tail)
     settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
-    names = list(scene) or catalogue_names()
+    names = list(scene) or ([] if tag else catalogue_names())
     import impactval
+    from impactval.scenarios.scene import load_catalogue
 
-    check_engine_steps([impactval.load_scene(n) for n in names], dts, float(tail))
+    check_engine_steps([impactval.load_scene(n) for n in names] + (load_catalogue(tag) if tag else []), dts,
+                       float(tail))
     _warn_if_compiling()
+    import shlex
 
-    def progress(row):
-        click.echo(f"  {row['scene']} / {row['engine']}: {row['status']}", err=True)
-
-    df = run(names, specs, settings, dt=dts if len(dts) > 1 else None, tol=tol, out=out, on_row=progress,
-             baseline=baseline, threshold=threshold)
-    click.echo(text_table(df))
+    command = "impactval " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    try:
+        df = run(names, specs, settings, dt=dts if len(dts) > 1 else None, tol=tol, out=out, store=store,
+                 workers=jobs, scheduler=scheduler, force=force, progress=make_progress("auto"), tag=tag,
+                 keep_series=keep_series, command=command, baseline=baseline, threshold=threshold)
+    except RunInterrupted as stop:
+        _print_rows(stop.rows, as_json, text_table)
+        click.echo(f"impactval: {stop}; report: {Path(out) / 'report.md'}", err=True)
+        sys.exit(stop.exit_code)
+    _print_rows(df, as_json, text_table)
+    for note in df.attrs.get("notes", []):
+        click.echo(f"impactval: {note}", err=True)
     regressed = False
     if "baseline" in df.attrs:
         from impactval.history import regressions
@@ -358,12 +381,25 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
         flagged = cmp[cmp["mark"] != ""]
         for _, r in flagged.iterrows():
             click.echo(f"  {r['mark']} {r['scene']} / {r['engine']}: {r['old_status']} -> {r['status']}, "
-                       f"largest error {100 * r['old_score']:.3f} % -> {100 * r['score']:.3f} %")
-        click.echo(f"against {baseline}: {len(flagged)} of {len(cmp)} rows marked")
+                       f"largest error {100 * r['old_score']:.3f} % -> {100 * r['score']:.3f} %", err=as_json)
+        click.echo(f"against {baseline}: {len(flagged)} of {len(cmp)} rows marked", err=as_json)
         regressed = regressions(cmp)
-    click.echo(f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}")
+    click.echo(f"run {df.attrs['run_id']}: {len(df)} rows ({df.attrs['n_reused']} reused from the store); "
+               f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}, store: {df.attrs['store']}",
+               err=as_json)
     if any_failed(df) or regressed:
         sys.exit(1)
+
+
+def _print_rows(df, as_json: bool, text_table) -> None:
+    """The rows as a table, or as JSON lines (NaN -> null)."""
+    if not as_json:
+        click.echo(text_table(df))
+        return
+    for rec in df.to_dict(orient="records"):
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else
+                     v.item() if hasattr(v, "item") else v) for k, v in rec.items()}
+        click.echo(json.dumps(clean))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,6 +36,9 @@ def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
         df = pd.read_csv(p, keep_default_na=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise ImpactvalError(f"{p}: not a results.csv ({err}).") from None
+    for col in ("err_t_m", "err_f_m", "err_delta_m"):     # schema 3 exports errors in % as NAME_pct
+        if col not in df and f"{col}_pct" in df:
+            df[col] = pd.to_numeric(df[f"{col}_pct"], errors="coerce") / 100.0
     missing = [c for c in (*KEY, "status", "schema_version", "err_t_m", "err_f_m", "err_delta_m") if c not in df]
     if missing:
         raise ImpactvalError(f"{p}: not a results.csv of impactval run (missing column {missing[0]!r}).")

@@ -1,17 +1,26 @@
-"""Run the reference and engine jobs over scenes; one row per (scene, engine) (style.md, pattern 5).
+"""Run the reference and engine jobs over scenes; one row per (scene, engine, settings) (style.md,
+pattern 5; issue 12).
 
-`run(scenes, engines, ...)` returns a pandas DataFrame. Every engine job runs in its own process
-with a timeout (`impactval.engines.base.run_isolated`), so a crash, hang or explosion becomes a
-status row and the run goes on. With `out`, each row is appended to `out/results.csv` as soon as
-it exists (a killed run loses nothing) and `out/report.md` is written at the end.
+`run(scenes, engines, ...)` returns a pandas DataFrame; `execute(jobs, ...)` is the lower level
+that sweeps and tuning call with their own job lists. Every engine job runs isolated with its
+timeout in a reusable worker process (`impactval.executor`), locally (`workers`, default: the
+cores) or on a Dask cluster (`scheduler`). Every row goes into the result store
+(`impactval.store`) in its own transaction as soon as it exists; a rerun reuses stored jobs with
+the same key (`force=True` recomputes). With `out`, results.csv / results.parquet /
+frequencies.csv are regenerated from the store and report.md is written at the end, also when the
+run is interrupted (Ctrl-C, SIGTERM: `RunInterrupted`).
 """
 from __future__ import annotations
 
-import csv
 import importlib.util
 import json
 import math
+import signal
+import sys
+import threading
 import time
+import uuid
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -20,25 +29,37 @@ import pandas as pd
 
 from impactval.compare import curve_error, relative_errors
 from impactval.engines import ENGINE_MODULES, ENGINES
-from impactval.engines.base import EngineSettings, run_isolated
+from impactval.engines.base import EngineSettings
 from impactval.errors import EngineError, ImpactvalError
-from impactval.reference.result import ImpactResult
+from impactval.jobs import Job, engine_version, reference_version
+from impactval.reference.result import FAILED, ImpactResult, Status
+from impactval.store import COLUMN_TYPES, SCHEMA_VERSION, RunStatus, Store
 
-SCHEMA_VERSION = 2
 #: statuses that make `impactval run` exit with 1 ("not-installed" and "skipped" only inform)
-FAILED_STATUSES = ("crashed", "timeout", "unstable", "no-contact")
-#: results.csv columns, in order
-COLUMNS = (
-    "schema_version", "run_id", "scene", "scene_hash", "engine", "version", "model", "contact", "integrator", "dt",
-    "segments", "status", "message",
-    "t_m", "f_m", "delta_m", "ref_t_m", "ref_f_m", "ref_delta_m",
-    "err_t_m", "err_f_m", "err_delta_m", "err_curve",
-    "contact_stiffness", "lin_t_m", "lin_f_m", "lin_delta_m",
-    "lin_err_t_m", "lin_err_f_m", "lin_err_delta_m", "lin_err_curve",
-    "rebound_velocity", "energy_error", "n_contacts", "n_steps",
-    "wall_time_build_s", "wall_time_step_s", "wall_time_s",
-    "structure_frequencies", "continuum_frequencies",
-)
+FAILED_STATUSES = tuple(sorted(s.value for s in FAILED))
+#: stored rows with these statuses are reused by a rerun; crashed and timeout rows are retried
+REUSABLE_STATUSES = ("ok", "no-contact", "unstable", "skipped", "not-installed")
+#: row columns, in order (units and meaning: docs/results.md)
+COLUMNS = tuple(COLUMN_TYPES)
+
+
+class RunInterrupted(Exception):
+    """A run stopped by SIGINT (Ctrl-C) or SIGTERM. `rows`: the jobs that finished (a DataFrame for
+    `run`, a list of row dicts for `execute`); `signum`; exit code 128 + signum (130, 143)."""
+
+    def __init__(self, signum: int, rows: Any, run_id: str, total: int) -> None:
+        self.signum, self.rows, self.run_id, self.total = signum, rows, run_id, total
+        super().__init__(f"run {run_id} interrupted by {signal.Signals(signum).name}: "
+                         f"{len(rows)} of {total} jobs finished and stored")
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+
+class _Stop(BaseException):
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
 
 
 def resolve_engine(spec: str) -> str:
@@ -131,28 +152,33 @@ def scene_hash(scene) -> str:
 
 
 def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
-             lin: ImpactResult | None) -> dict[str, Any]:
-    """One results row (see COLUMNS)."""
+             lin: ImpactResult | None, job_key: str = "") -> dict[str, Any]:
+    """One results row (see COLUMNS; errors are signed fractions (engine - reference) / reference)."""
     err = relative_errors(res, ref) if res.success else dict.fromkeys(("t_m", "f_m", "delta_m"), math.nan)
     diag = res.diagnostics or {}
     row: dict[str, Any] = dict.fromkeys(COLUMNS, math.nan)
     rs = res.settings or {}
+    law = res.contact_law
+    dt = _num(res.dt) if math.isfinite(_num(res.dt)) else _num(settings.dt)
+    steps_per_s = res.n_steps / res.wall_time_step_s if res.n_steps and res.wall_time_step_s > 0 else math.nan
     row.update(
-        schema_version=SCHEMA_VERSION, run_id=run_id, scene=scene.name, scene_hash=scene_hash(scene),
-        engine=res.source or spec,
+        schema_version=SCHEMA_VERSION, job_key=job_key, run_id=run_id, scene=scene.name,
+        scene_hash=scene_hash(scene), engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
-        integrator=rs.get("integrator") or settings.integrator or "", dt=settings.dt,
+        integrator=rs.get("integrator") or settings.integrator or "", dt=dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body
-        segments=next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
-                       if v not in (None, "", 0)), ""),
-        status=res.status, message=res.message,
+        segments=str(next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
+                           if v not in (None, "", 0)), "")),
+        status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
         err_curve=curve_error(res, ref) if res.success else math.nan,
-        contact_stiffness=_num(diag.get("contact_stiffness")),
-        rebound_velocity=res.rebound_velocity, energy_error=res.energy_error, n_contacts=len(res.contacts),
-        n_steps=res.n_steps, wall_time_build_s=res.wall_time_build_s, wall_time_step_s=res.wall_time_step_s,
-        wall_time_s=res.wall_time_s,
+        contact_law=getattr(law, "kind", "") or "",
+        contact_stiffness=_contact_stiffness(res),
+        rebound_velocity=res.rebound_velocity, energy_error=res.energy_error, dt_limit=_num(res.dt_limit),
+        model_error=_num(res.model_error), n_contacts=len(res.contacts),
+        n_steps=int(res.n_steps), steps_per_s=steps_per_s, wall_time_build_s=res.wall_time_build_s,
+        wall_time_step_s=res.wall_time_step_s, wall_time_s=res.wall_time_s,
         structure_frequencies=json.dumps(diag["structure_frequencies"]) if "structure_frequencies" in diag else "",
         continuum_frequencies=json.dumps(diag["continuum_frequencies"]) if "continuum_frequencies" in diag else "",
     )
@@ -165,26 +191,15 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     return row
 
 
-class _CsvSink:
-    """Appends rows to results.csv; an existing file with other columns is moved aside first."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if path.exists():
-            with path.open(newline="") as fh:
-                header = next(csv.reader(fh), None)
-            if header != list(COLUMNS):
-                path.rename(path.with_name(f"{path.stem}-old-{time.strftime('%Y%m%dT%H%M%S')}{path.suffix}"))
-
-    def write(self, row: dict[str, Any]) -> None:
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=COLUMNS)
-            if new:
-                w.writeheader()
-            w.writerow(row)
-            fh.flush()
+def _contact_stiffness(res: ImpactResult) -> float:
+    """k [N/m] of a linear contact law: from `contact_law` (kind "linear"), else the adapter's
+    diagnostics; NaN for a Hertz law."""
+    law = res.contact_law
+    if law is not None and getattr(law, "kind", "") == "linear":
+        return _num(getattr(law, "coefficient", math.nan))
+    if law is not None:
+        return math.nan
+    return _num((res.diagnostics or {}).get("contact_stiffness"))
 
 
 def _as_scene(s):
@@ -207,16 +222,243 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
     return replace(settings, options=tuple(opts))
 
 
+# ---------------------------------------------------------------------------- execution
+class _References:
+    """Reference (and linear-theory) solutions, computed once per scene, tolerance and spring."""
+
+    def __init__(self) -> None:
+        self._ref: dict[tuple, ImpactResult] = {}
+        self._lin: dict[tuple, ImpactResult | None] = {}
+
+    def ref(self, job: Job) -> ImpactResult:
+        from impactval.jobs import canonical_scene
+
+        key = (canonical_scene(job.scene), job.tol)
+        if key not in self._ref:
+            import impactval
+
+            self._ref[key] = impactval.solve(job.scene, tol=job.tol)
+        return self._ref[key]
+
+    def lin(self, job: Job, res: ImpactResult) -> ImpactResult | None:
+        """The linear-theory reference for a linear contact law (a native contact), else None."""
+        from impactval.jobs import canonical_scene
+
+        if not res.success:
+            return None
+        law = res.contact_law
+        linear = getattr(law, "kind", "") == "linear" if law is not None else job.settings.contact == "native"
+        k = _contact_stiffness(res)
+        if not (linear and math.isfinite(k) and k > 0):
+            return None
+        key = (canonical_scene(job.scene), job.tol, k)
+        if key not in self._lin:
+            self._lin[key] = _linear_reference(job.scene, job.tol, k)
+        return self._lin[key]
+
+
+def _notify_start(callback, key: str, fn, *args):
+    callback(key)
+    return fn(*args)
+
+
+class _Signals:
+    """While active (main thread only): SIGINT and SIGTERM raise _Stop(signum) in the main thread."""
+
+    def __enter__(self):
+        self.old = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self.old[sig] = signal.signal(sig, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, _frame):
+        raise _Stop(signum)
+
+    def __exit__(self, *exc):
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+        return False
+
+
+def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, workers: int | None = None,
+            scheduler: Any = None, force: bool = False, progress: Any = None, out: str | Path | None = None,
+            command: str = "", tag: str | None = None, keep_series: bool = False,
+            on_row: Callable[[dict[str, Any]], None] | None = None, run_id: str | None = None) -> list[dict[str, Any]]:
+    """Run engine jobs (reusing stored ones) and return one row per job, in the jobs' order.
+
+    Parameters
+    ----------
+    jobs : iterable of `impactval.jobs.Job` (scene, engine spec, EngineSettings, reference tol)
+    store : Store, path of an SQLite file, a database URL, or None (an in-memory store)
+    workers : int, optional
+        Engine jobs running at once on this machine (default: the cores); ignored with `scheduler`.
+    scheduler : Dask scheduler address ("tcp://host:8786"), Client or LocalCluster, optional
+    force : bool
+        Recompute jobs already in the store (the new rows replace the stored ones).
+    progress : object with start/started/done/close and optionally tick (see `impactval.progress`)
+    out : directory, optional; recorded with the run (exports select runs by it)
+    command, tag : recorded with the run
+    keep_series : bool
+        Also store each engine job's time series (compressed; `Store.load_series(job_key)`).
+    on_row : callable, optional
+        Called with each row dict as soon as it is stored.
+    run_id : str, optional
+        The run's id (default: a new UUID4).
+
+    Rows are dicts with the keys of `COLUMNS` (errors as signed fractions). Stored rows with a
+    status in `REUSABLE_STATUSES` are reused (crashed and timeout rows are retried). Raises
+    `RunInterrupted` (holding the finished rows) on SIGINT/SIGTERM, after killing the engine
+    workers and recording the run as interrupted.
+    """
+    from impactval import executor as ex
+    from impactval.store import pack_series
+
+    jobs = list(jobs)
+    own_store = not isinstance(store, Store)
+    db = Store(store) if own_store else store
+    keys = [j.key for j in jobs]
+    run_id = run_id or str(uuid.uuid4())
+    engines = {j.spec: engine_version(j.spec) for j in jobs}
+    db.begin_run(run_id, command, out, engines, reference_version(), tag=tag, n_jobs=len(jobs))
+    found = {} if force else db.find(set(keys), REUSABLE_STATUSES)
+    rows: dict[str, dict[str, Any]] = {}
+    position = {k: i for i, k in reversed(list(enumerate(keys)))}
+    for k in found:
+        rows[k] = db.put(found[k], run_id=run_id, position=position[k], reused=True)
+    n_reused = len(rows)
+    todo: dict[str, Job] = {}
+    for j, k in zip(jobs, keys):
+        if k not in rows and k not in todo:
+            todo[k] = j
+    if progress is not None:
+        progress.start(len(set(keys)), n_reused)
+    refs = _References()
+
+    def finish(k: str, res: ImpactResult, seconds: float) -> None:
+        job = todo[k]
+        row = make_row(run_id, job.scene, job.spec, job.settings, res, refs.ref(job), refs.lin(job, res), k)
+        meta = dict(engine_version=engines[job.spec], adapter_version=_adapter_version(job.spec),
+                    reference_version=reference_version(), tol=float(job.tol),
+                    settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr),
+                    diagnostics=json.dumps(res.diagnostics or {}, sort_keys=True, default=repr),
+                    validity=json.dumps(list(res.validity or ())))
+        stored = db.put(row, run_id=run_id, position=position[k], reused=False, force=force, meta=meta,
+                        series=pack_series(res) if keep_series and res.success else None, contacts=res.contacts)
+        rows[k] = stored
+        if progress is not None:
+            progress.done(job.label(), stored, seconds)
+        if on_row is not None:
+            on_row(stored)
+
+    client = pool = None
+    futures: dict[Any, str] = {}
+    status = RunStatus.FAILED
+    try:
+        with _Signals():
+            # rows that need no engine process: not installed, unsupported settings
+            remote = {}
+            for k, job in todo.items():
+                res = _unavailable(job.spec, job.scene, job.settings)
+                if res is not None:
+                    finish(k, res, 0.0)
+                else:
+                    remote[k] = job
+            if remote:
+                if scheduler is not None:
+                    pool, client = ex.dask_executor(scheduler)
+                else:
+                    pool = ex.local_executor(workers)
+                t_start: dict[str, float] = {}
+
+                def started(k: str) -> None:
+                    t_start[k] = time.monotonic()
+                    if progress is not None:
+                        progress.started(todo[k].label())
+
+                # grouped by engine: a worker thread keeps serving the engine it has loaded
+                for k, job in sorted(remote.items(), key=lambda kv: kv[1].spec):
+                    if scheduler is None:       # a local thread can say when the job starts
+                        fut = pool.submit(_notify_start, started, k, ex.run_job, job.spec, job.scene, job.settings)
+                    else:
+                        started(k)
+                        fut = pool.submit(ex.run_job, job.spec, job.scene, job.settings)
+                    futures[fut] = k
+                pending = set(futures)
+                while pending:
+                    done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                    if progress is not None and hasattr(progress, "tick"):
+                        progress.tick()
+                    for fut in done:
+                        k = futures[fut]
+                        try:
+                            res = fut.result()
+                        except Exception as err:  # noqa: BLE001 - a lost Dask worker is that job's row
+                            job = todo[k]
+                            res = ImpactResult.failed(job.scene.name, job.spec, Status.CRASHED,
+                                                      f"executor lost the job: {type(err).__name__}: {err}",
+                                                      settings=job.settings.as_dict())
+                        finish(k, res, time.monotonic() - t_start.get(k, time.monotonic()))
+            status = RunStatus.FINISHED
+    except (_Stop, KeyboardInterrupt) as stop:
+        signum = getattr(stop, "signum", signal.SIGINT)
+        status = RunStatus.INTERRUPTED
+        if pool is not None:
+            for fut in list(futures):
+                fut.cancel()                    # queued jobs; on Dask also the ones running remotely
+            _shutdown(pool)
+        ex.kill_workers()
+        done_rows = [rows[k] for k in dict.fromkeys(keys) if k in rows]
+        raise RunInterrupted(int(signum), done_rows, run_id, len(set(keys))) from None
+    finally:
+        if pool is not None:
+            _shutdown(pool)
+        if scheduler is None or client is not None:
+            ex.kill_workers()
+        if client is not None:
+            client.close()
+        n_failed = sum(1 for r in rows.values() if r["status"] in FAILED_STATUSES)
+        db.end_run(run_id, status, n_reused, n_failed)
+        if progress is not None:
+            progress.close()
+        if own_store:
+            db.close()
+    return [rows[k] for k in keys]
+
+
+def _shutdown(pool) -> None:
+    """Stop an executor without waiting, dropping queued jobs (Dask's executor has no cancel_futures)."""
+    try:
+        pool.shutdown(wait=False, cancel_futures=True)
+    except TypeError:
+        pool.shutdown(wait=False)
+
+
+def _adapter_version(spec: str) -> str:
+    from impactval.jobs import adapter_version
+
+    return adapter_version(spec)
+
+
+def build_jobs(scenes: Iterable, specs: list[str], variants: list[EngineSettings], tol: float) -> list[Job]:
+    """Scene-major job list: for each scene, each settings variant, each engine."""
+    return [Job(scene, spec, settings_for(v, spec), tol) for scene in scenes for v in variants for spec in specs]
+
+
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
         dt: float | list[float] | None = None, contact: str | None = None, integrator: str | None = None,
         segments: int | None = None, timeout_s: float | None = None, tol: float = 1e-6,
         out: str | Path | None = None, on_row: Callable[[dict[str, Any]], None] | None = None,
-        baseline: str | Path | None = None, threshold: float = 0.2) -> pd.DataFrame:
-    """Run the reference and every engine on every scene; one row per (scene, engine).
+        baseline: str | Path | None = None, threshold: float = 0.2, store: Store | str | Path | None = None,
+        workers: int | None = None, scheduler: Any = None, force: bool = False, progress: Any = None,
+        tag: str | None = None, keep_series: bool = False, command: str | None = None) -> pd.DataFrame:
+    """Run the reference and every engine on every scene; one row per (scene, engine, time step).
 
     Parameters
     ----------
-    scenes : iterable of Scene, catalogue names or TOML paths
+    scenes : iterable of Scene, catalogue names or TOML paths (empty with `tag`: the catalogue
+        scenes carrying `tag`)
     engines : engine names ("mujoco", ...) or adapters as "package.module:Class" (or one
         comma-separated string)
     settings : EngineSettings, optional
@@ -226,19 +468,26 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     tol : float
         Relative tolerance of the reference solutions (Hertz and, for native contact, linear).
     out : directory, optional
-        Append each row to `out/results.csv` as soon as it exists; write `out/report.md` at the end.
+        The store defaults to `out/impactval.sqlite`; at the end (also after an interrupt)
+        results.csv, frequencies.csv, results.parquet (with pyarrow) are regenerated from the store
+        and report.md covers this run's rows.
     on_row : callable, optional
-        Called with each row dict as soon as it exists (e.g. to print progress).
+        Called with each row dict as soon as it is stored.
     baseline : path, optional
         results.csv of an earlier run: the report gets a section with marks (see
         `impactval.history`) and the DataFrame's `attrs["baseline"]` holds the comparison.
     threshold : float
         Relative change of a row's score that counts as worse or better (0.2 = 20 %).
+    store, workers, scheduler, force, progress, keep_series : see `execute`
+    tag : str, optional
+        Select catalogue scenes by tag (added to `scenes`); recorded with the run.
 
     Returns a DataFrame with the columns of `COLUMNS`; errors are signed relative differences
     (engine - reference) / reference; `err_curve` is the whole-curve error (see
-    `impactval.compare.curve_error`); `lin_*` compare a native (linear) contact with the
-    linear-theory reference for the same spring (NaN for other contact modes).
+    `impactval.compare.curve_error`); `lin_*` compare a linear contact law with the
+    linear-theory reference for the same spring (NaN for other contact laws).
+    `df.attrs`: run_id, n_reused, store (URL). Raises `RunInterrupted` (with `.rows` a DataFrame
+    of the finished jobs) after writing the exports and the report of what finished.
     """
     if isinstance(engines, str):
         engines = [e.strip() for e in engines.split(",") if e.strip()]
@@ -255,44 +504,48 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     variants = [replace(base, dt=step, **over) for step in dts]
     settings = variants[0]
     _check_settings_somewhere(specs, settings)
-    per_engine = {(spec, v.dt): settings_for(v, spec) for spec in specs for v in variants}
     if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
         raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {threshold!r}.")
     old = None
-    if baseline is not None:      # read before this run appends to what may be the same file
+    if baseline is not None:      # read before this run rewrites what may be the same file
         from impactval.history import load_results
 
         old = load_results(baseline, SCHEMA_VERSION)
     scene_objs = [_as_scene(s) for s in scenes]
+    if tag is not None:
+        from impactval.scenarios.scene import load_catalogue
+
+        tagged = load_catalogue(tag)
+        if not tagged:
+            from impactval.scenarios.scene import load_catalogue as all_scenes
+
+            known = sorted({t for s in all_scenes() for t in s.tags})
+            raise ImpactvalError(f"tag {tag!r}: no catalogue scene carries it; known tags: {', '.join(known)}.")
+        scene_objs += [s for s in tagged if s.name not in {x.name for x in scene_objs}]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")
-    sink = _CsvSink(Path(out) / "results.csv") if out is not None else None
-    run_id = time.strftime("%Y%m%dT%H%M%S")
-    import impactval
-
-    rows = []
-    for scene in scene_objs:
-        ref = impactval.solve(scene, tol=tol)
-        lin_cache: dict[float, ImpactResult | None] = {}
-        for spec, step in ((sp, v.dt) for v in variants for sp in specs):
-            eng = per_engine[(spec, step)]
-            res = _unavailable(spec, scene, eng) or run_isolated(spec, scene, eng)
-            lin = None
-            if settings.contact == "native" and res.success:
-                k = _num((res.diagnostics or {}).get("contact_stiffness"))
-                if math.isfinite(k) and k > 0:
-                    if k not in lin_cache:
-                        lin_cache[k] = _linear_reference(scene, tol, k)
-                    lin = lin_cache[k]
-            row = make_row(run_id, scene, spec, eng, res, ref, lin)
-            if sink is not None:
-                sink.write(row)
-            if on_row is not None:
-                on_row(row)
-            rows.append(row)
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        if store is None:
+            store = Path(out) / "impactval.sqlite"
+    db = store if isinstance(store, Store) else Store(store)
+    jobs = build_jobs(scene_objs, specs, variants, tol)
+    cmd = command if command is not None else "run(" + ", ".join(s.name for s in scene_objs) + "; " + \
+        ",".join(specs) + ")"
+    run_id = str(uuid.uuid4())
+    interrupted: RunInterrupted | None = None
+    try:
+        rows = execute(jobs, store=db, run_id=run_id, workers=workers, scheduler=scheduler, force=force, progress=progress,
+                       out=out, command=cmd, tag=tag, keep_series=keep_series, on_row=on_row)
+    except RunInterrupted as err:
+        interrupted, rows = err, err.rows
     df = pd.DataFrame(rows, columns=list(COLUMNS))
+    df.attrs.update(store=db.url, n_reused=0)
     report = markdown_report(df, settings)
-    if len(variants) > 1:
+    if interrupted is not None:
+        report += (f"\n**Interrupted** ({signal.Signals(interrupted.signum).name}): {len(rows)} of "
+                   f"{interrupted.total} jobs finished; rerun the same command to run the rest.\n")
+    if len(variants) > 1 and len(df):
         from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
 
         report += speed_accuracy_table(df)
@@ -300,14 +553,26 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
             png = speed_accuracy_plot(df, Path(out) / "speed_accuracy.png")
             if png is not None:
                 report += f"\n![wall time vs error]({png.name})\n"
-    if old is not None:
+    if old is not None and len(df):
         from impactval import history
 
         cmp = history.compare(df, old, threshold)
         df.attrs["baseline"] = cmp
         report += history.markdown(cmp, baseline, threshold)
+    notes: list[str] = []
     if out is not None:
+        from impactval.store import export
+
+        notes = export(db, out)
         (Path(out) / "report.md").write_text(report)
+    df.attrs["notes"] = notes
+    info = db.run_info(run_id)
+    df.attrs.update(run_id=info["id"], n_reused=info["n_reused"], status=info["status"])
+    if not isinstance(store, Store):
+        db.close()
+    if interrupted is not None:
+        interrupted.rows = df
+        raise interrupted
     return df
 
 

@@ -25,3 +25,24 @@ class Hang(EngineAdapter):
 
     def _simulate(self, scene, settings):
         time.sleep(3600)  # pragma: no cover
+
+
+def _slow_mujoco():
+    from impactval.engines.mujoco_ import MujocoAdapter
+
+    class SlowMujoco(MujocoAdapter):
+        """MuJoCo, but each job first sleeps `SLOW_S` seconds: long enough to kill a run halfway."""
+
+        name = "slow-mujoco"
+
+        def _simulate(self, scene, settings):
+            time.sleep(float(os.environ.get("IMPACTVAL_TEST_SLOW_S", "0.6")))
+            return super()._simulate(scene, settings)
+
+    return SlowMujoco
+
+
+def __getattr__(name):          # "fake_engines:SlowMujoco" without importing MuJoCo's adapter up front
+    if name == "SlowMujoco":
+        return _slow_mujoco()
+    raise AttributeError(name)

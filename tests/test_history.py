@@ -66,7 +66,7 @@ def test_nightly_run_flags_a_regression_and_exits_1(tmp_path):
     assert same.returncode == 0, same.stdout + same.stderr
     assert "0 of 1 rows marked" in same.stdout
     df = pd.read_csv(base)
-    for k in ("err_t_m", "err_f_m", "err_delta_m"):
+    for k in ("err_t_m_pct", "err_f_m_pct", "err_delta_m_pct"):   # schema 3: errors in %
         df[k] = df[k] / 10                  # a baseline ten times better
     better = tmp_path / "better.csv"
     df.to_csv(better, index=False)

@@ -11,7 +11,8 @@ import impactval.cli
 from conftest import requires_mujoco
 from impactval.compare import curve_error, relative_errors
 from impactval.errors import EngineError
-from impactval.runner import COLUMNS, run
+from impactval.runner import run
+from impactval.store import EXPORT_COLUMNS
 
 
 @pytest.fixture(scope="module")
@@ -54,15 +55,17 @@ def test_missing_engine_is_a_not_installed_row(monkeypatch, tmp_path):
 
 @requires_mujoco
 def test_killed_engine_leaves_crashed_row_and_the_others(tmp_path):
-    """Issue 4 bar: an engine process killed mid-run is a `crashed` row; the other rows are there,
-    and every row was appended to results.csv as it finished."""
+    """Issue 4 bar: an engine process killed mid-run is a `crashed` row; the other rows are there.
+    The same job asked twice is one job: two equal rows in the DataFrame, once in the export."""
     df = run(["plate_steel"], ["mujoco", "fake_engines:KillSelf", "mujoco"], dt=1e-6, timeout_s=120, out=tmp_path)
     assert list(df["status"]) == ["ok", "crashed", "ok"]
     assert "SIGKILL" in df["message"][1]
     assert abs(df["err_f_m"][0]) < 5e-4 and abs(df["err_f_m"][2]) < 5e-4
     with (tmp_path / "results.csv").open() as fh:
         rows = list(csv.DictReader(fh))
-    assert [r["status"] for r in rows] == ["ok", "crashed", "ok"] and list(rows[0]) == list(COLUMNS)
+    assert sorted((r["engine"], r["status"]) for r in rows) == [("KillSelf", "crashed"), ("mujoco", "ok")]
+    assert list(rows[0]) == list(EXPORT_COLUMNS)
+    assert df["job_key"][0] == df["job_key"][2] and df["err_f_m"][0] == df["err_f_m"][2]
     report = (tmp_path / "report.md").read_text()
     assert "| plate_steel | mujoco |" in report and "**crashed**" in report
 
@@ -101,7 +104,8 @@ def test_cli_run_writes_files_and_exit_codes(tmp_path):
                                                   "--out", str(out)])
     assert res.exit_code == 1
     with (out / "results.csv").open() as fh:
-        assert [r["status"] for r in csv.DictReader(fh)] == ["ok", "crashed"]      # appended
+        # the export covers every job run into this --out, each once
+        assert sorted(r["status"] for r in csv.DictReader(fh)) == ["crashed", "ok"]
 
 
 @requires_mujoco

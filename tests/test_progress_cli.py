@@ -1,0 +1,82 @@
+"""`impactval run --tag/--json` and the progress display (issue 12)."""
+import io
+import json
+import math
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import requires_mujoco
+from impactval.progress import PlainProgress, RichProgress, make_progress
+
+
+def test_plain_progress_is_one_line_per_job():
+    buf = io.StringIO()
+    p = make_progress("auto", buf)                       # not a terminal: plain lines
+    assert isinstance(p, PlainProgress) and not isinstance(p, RichProgress)
+    p.start(3, 1)
+    p.done("plate_steel / mujoco dt=1e-06", {"status": "ok"}, 0.25)
+    p.done("plate_steel / mujoco dt=5e-07", {"status": "crashed", "message": "boom"}, 1.0)
+    lines = buf.getvalue().splitlines()
+    assert lines == ["1 of 3 jobs reused from the store (--force recomputes them)",
+                     "[2/3] plate_steel / mujoco dt=1e-06: ok (0.25 s)",
+                     "[3/3] plate_steel / mujoco dt=5e-07: crashed (1.00 s)"]
+    assert p.failed == 1
+
+
+def test_rich_progress_shows_counts_failures_eta_and_running_jobs():
+    pytest.importorskip("rich")
+    from rich.console import Console
+
+    p = RichProgress(io.StringIO())
+    p.start(4, 0)
+    p.started("beam / exudyn dt=5e-08")
+    p.running["beam / exudyn dt=5e-08"] -= 125.0        # running for two minutes
+    p.done("plate / mujoco dt=1e-06", {"status": "unstable", "message": "energy grew"}, 0.1)
+    con = Console(file=io.StringIO(), width=120)
+    con.print(p._render())
+    text = con.file.getvalue()
+    p.close()
+    assert "1/4 jobs" in text and "1 failed" in text and "ETA" in text
+    assert "running beam / exudyn dt=5e-08  2:05 min" in text
+    assert "plate / mujoco dt=1e-06: unstable: energy grew" in p.stream.getvalue()
+
+
+def test_bad_tag_is_one_line(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "--tag", "nosuch", "--out", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and "tag 'nosuch': no catalogue scene carries it; known tags:" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@requires_mujoco
+def test_tag_selects_scenes_and_json_prints_rows(tmp_path):
+    """--tag plate runs the plate scene only (the one catalogue scene tagged plate); --json prints
+    one JSON object per row, NaN as null, the table and notes go to stderr."""
+    out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "--tag", "plate", "--engines", "mujoco",
+                          "--json", "--out", str(tmp_path)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [r["scene"] for r in rows] == ["plate_steel"] and rows[0]["status"] == "ok"
+    assert rows[0]["lin_t_m"] is None and abs(rows[0]["err_f_m"]) < 5e-4
+    assert len(rows[0]["run_id"]) == 36 and rows[0]["job_key"]
+
+
+def test_plain_progress_says_a_long_job_is_alive():
+    buf = io.StringIO()
+    p = PlainProgress(buf, heartbeat_s=0.05)
+    p.start(1, 0)
+    p.started("beam / exudyn dt=5e-08")
+    p.tick()
+    assert buf.getvalue() == ""                         # not yet
+    time.sleep(0.06)
+    p.tick()
+    p.tick()                                            # one line per heartbeat, not per tick
+    assert buf.getvalue().startswith("  still running: beam / exudyn dt=5e-08 (0.")
+    assert buf.getvalue().count("still running") == 1
+    p.done("beam / exudyn dt=5e-08", {"status": "ok"}, 0.1)
+    time.sleep(0.06)
+    p.tick()
+    assert buf.getvalue().count("still running") == 1   # finished: no more heartbeats
