@@ -310,7 +310,22 @@ def cli_cases(d: Path) -> list[Case]:
         cases.append(Case(f"run {label}", run + args, e, names, owner))
     for label, path in (("under-file", f"{f}/runs"), ("unwritable", "/proc/nope/runs"), ("is-file", str(f)), ("empty", "")):
         cases.append(Case(f"run --out {label}", ["run", "plate_steel", "--out", path], "refuse", "--out"))
+    for label, args, e, names, owner in (
+            ("--store under-file", ["--store", f"{f}/x.sqlite"], "refuse", "--store", "hardening"),
+            ("--store unwritable", ["--store", "/proc/nope/x.sqlite"], "refuse", "--store", "hardening"),
+            ("--store empty", ["--store", ""], "refuse", "--store", "hardening"),
+            ("--store dir", ["--store", str(d)], "refuse", "--store", "hardening"),
+            ("--store postgres unreachable", ["--store", "postgresql://nobody@127.0.0.1:1/x"], "refuse", "store",
+             "runs-at-scale"),
+            ("--jobs 0", ["--jobs", "0"], "refuse", "--jobs", "runs-at-scale"),
+            ("--tag nosuchtag", ["--tag", "nosuchtag"], "refuse", "tag", "runs-at-scale"),
+    ):
+        cases.append(Case(f"run {label}", ["run", "plate_steel", "--engines", "nosuch_mod:A", "--out", str(d / "rs"),
+                                           *args], e, names, owner))
     cases += [
+        Case("no command", [], "either"),
+        Case("--version", ["--version"], "ok"),
+        Case("unknown command", ["frobnicate"], "refuse", "frobnicate"),
         Case("run bad scene name", ["run", "nosuchscene", "--out", str(d / "r2")], "refuse", "nosuchscene"),
         Case("run mujoco plate ok", ["run", "plate_steel", "--engines", "mujoco", "--dt", "1e-6", "--out", str(d / "r3")],
              "either"),

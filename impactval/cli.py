@@ -245,6 +245,7 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
             page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
         comparisons.append(cmp)
         e = cmp.model_form_error
+        check_answer(sc.name, model_form_error_t_m=e.t_m, model_form_error_f_m=e.f_m, model_form_error_delta_m=e.delta_m)
         click.echo(f"{sc.name:24s} linear-contact model-form error: t_m {100 * e.t_m:+8.3f} %  "
                    f"f_m {100 * e.f_m:+8.3f} %  delta_m {100 * e.delta_m:+8.3f} %   -> {page}")
     with write_guard("--out", out_dir):
@@ -348,6 +349,8 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
     dts = _parse_dts(dt)
     check_output_dir(out, "--out")
+    if store is not None and "://" not in store:
+        check_output_file(store, "--store")
     check_tol(tol)
     check_run_number("--timeout", timeout)
     check_run_number("--tail", tail)
