@@ -53,8 +53,8 @@ LIMITS: dict[str, Limit] = {
                          "roughness dominate) to 10 m"),
     "ball.velocity": Limit(1e-6, 1e3, "m/s", "quasi-static elastic impact: from 1 um/s (slower, the approach "
                            "is sub-atomic) to 1 km/s, well below the sound speed of solids (3-6 km/s)"),
-    "ball.mass": Limit(1e-15, 1e8, "kg", "from a 1 um ball (~1e-15 kg) to a 10 m steel ball (~3e7 kg); "
-                       "given, or density x volume"),
+    "ball.mass": Limit(1e-18, 2e8, "kg", "from a 1 um ball of the lightest material (4e-18 kg) to a 10 m ball "
+                       "of the densest (1.3e8 kg); given, or density x volume"),
     "materials.young": Limit(1e4, 2e12, "Pa", "from soft gels (~10 kPa) to diamond (1.2 TPa)"),
     "materials.poisson": Limit(-1.0, 0.5, "-", "thermodynamic bounds of an isotropic solid; 0.5 "
                                "(incompressible) makes the contact modulus singular", open_low=True, open_high=True),
@@ -170,6 +170,13 @@ def check_tags(src: str, value: Any) -> tuple[str, ...]:
     return tuple(check_name(src, f"tags[{i}]", t) for i, t in enumerate(value))
 
 
+def check_strings(src: str, doc: Any, default_name: str) -> None:
+    """The strings of a scene document: `name` (or `default_name`), `tags`, `description`."""
+    check_name(src, "name", doc.get("name", default_name))
+    check_tags(src, doc.get("tags", []))
+    check_description(src, doc.get("description", ""))
+
+
 # ----------------------------------------------------------------------------- a Scene as a whole
 
 def _check_material(src: str, where: str, mat: Any) -> None:
@@ -249,7 +256,8 @@ def check_list(src: str, key: str, values: Any) -> tuple[float, ...]:
 
 
 def check_scene(scene: Any, src: str) -> None:
-    """Cross-field checks, after every field is in its range (so nothing here overflows).
+    """Cross-field checks, after every field is in its range (so nothing here overflows); run by
+    `load_scene` and, for Scene objects, by `check_scene_fields` (so by `impactval.solve`).
 
     The peak approach on a rigid face, delta_m = (5 m v0^2 / (4 alpha))^(2/5), must stay small against
     the radius: Hertz theory assumes a contact radius sqrt(R delta) much smaller than R.

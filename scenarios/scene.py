@@ -195,6 +195,7 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     """Build and validate a Scene from a parsed TOML document (a mapping)."""
     src = source
     _check_keys(src, "", doc, {"ball", "target"}, {"name", "description", "tags", "materials"})
+    limits.check_strings(src, doc, default_name)     # name, tags, description: the safe set (issue 18)
     mats = _materials(src, doc)
 
     b = doc["ball"]
@@ -225,15 +226,16 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
             raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
                              f"got {t['support']!r}.")
         at = t["impact_at"]
-        if not limits.is_real(at) or not math.isfinite(at) or not 0.0 < at <= 1.0:
+        if isinstance(at, bool) or not isinstance(at, (int, float)) or not math.isfinite(at) or not 0.0 < at <= 1.0:
             raise SceneError(f"{src}: [target] impact_at must be a fraction of the length in (0, 1] "
                              f"(0 < impact_at < 1 for a beam supported at both ends), got {at!r}.")
         if at >= 1.0 and t["support"] != "cantilever":
             raise SceneError(f"{src}: [target] impact_at = {at!r} is on a support of a {t['support']} beam; "
                              f"use a value strictly between 0 and 1.")
         modes = t.get("modes")
-        if modes is not None:
-            limits.check_count(src, "target", "modes", modes)
+        if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 100000):
+            raise SceneError(f"{src}: [target] modes must be a whole number from 1 to 100000 (or omitted for an "
+                             f"automatic choice), got {modes!r}.")
         target = Beam(_material(src, "target", t["material"], mats), t["support"],
                       _positive(src, "target", "length", t["length"], "m"),
                       _positive(src, "target", "width", t["width"], "m"),
@@ -252,12 +254,16 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
                 raise SceneError(f"{src}: [target] {key} values must be positive, got {bad[0]!r}.")
         target = ModalTarget(_material(src, "target", t["material"], mats), omega, mm, phi)
 
-    name = limits.check_name(src, "name", doc.get("name", limits.safe_name(default_name)))
-    desc = limits.check_description(src, doc.get("description", ""))
-    tags = limits.check_tags(src, doc.get("tags", []))
-    scene = Scene(name, ball, target, desc, tags, source)
-    limits.check_scene(scene, src)
-    return scene
+    name = doc.get("name", default_name)
+    if not isinstance(name, str) or not name:
+        raise SceneError(f"{src}: name must be a non-empty string, got {name!r}.")
+    desc = doc.get("description", "")
+    if not isinstance(desc, str):
+        raise SceneError(f"{src}: description must be a string, got {desc!r}.")
+    tags = doc.get("tags", [])
+    if not isinstance(tags, list) or not all(isinstance(x, str) for x in tags):
+        raise SceneError(f"{src}: tags must be a list of strings, got {tags!r}.")
+    return Scene(name, ball, target, desc, tuple(tags), source)
 
 
 def catalogue_names() -> list[str]:
@@ -300,7 +306,9 @@ def load_scene(name_or_path: str | Path) -> Scene:
         raise SceneError(f"{path}: malformed TOML: nested too deeply.") from None
     except (OSError, UnicodeDecodeError) as err:
         raise SceneError(f"{path}: cannot read the file: {err}.") from None
-    return scene_from_dict(doc, source=str(path), default_name=path.stem)
+    scene = scene_from_dict(doc, source=str(path), default_name=limits.safe_name(path.stem))
+    limits.check_scene(scene, str(path))
+    return scene
 
 
 def load_catalogue(tag: str | None = None) -> list[Scene]:

@@ -20,7 +20,7 @@ import impactval
 from impactval.cli import main
 from impactval.errors import ImpactvalError, SceneError
 from impactval.scenarios import limits
-from impactval.scenarios.scene import scene_from_dict
+from impactval.scenarios.scene import load_scene, scene_from_dict
 
 NONFINITE = re.compile(r"(?<![A-Za-z_/])(nan|NaN|-?inf|-?Infinity)(?![A-Za-z_])")
 CI = settings(max_examples=60, deadline=10_000, suppress_health_check=[HealthCheck.too_slow,
@@ -90,7 +90,7 @@ def _finite_answer(r) -> bool:
 def test_any_scene_is_refused_with_a_field_or_solved_finite(doc):
     """A scene is refused with one line naming the field, or it solves to finite numbers (deadline 10 s)."""
     try:
-        scene = scene_from_dict(doc, source="s.toml")
+        scene = load_scene(scene_from_dict(doc, source="s.toml"))    # load_scene adds the cross-field checks
     except SceneError as err:
         msg = str(err)
         assert msg.startswith("s.toml:") and "\n" not in msg
@@ -129,7 +129,7 @@ def in_range_scenes(draw):
 def test_scenes_inside_the_limits_solve_finite(doc):
     """Inside the published ranges the solver gives finite answers (no overflow, no NaN) in time."""
     try:
-        scene = scene_from_dict(doc, source="s.toml")
+        scene = load_scene(scene_from_dict(doc, source="s.toml"))    # load_scene adds the cross-field checks
     except SceneError as err:           # cross-field checks only: every field alone is in range
         assert any(w in str(err) for w in ("approach", "contact patch", "length /", "width /", "from a support")), \
             str(err)
