@@ -38,5 +38,5 @@ def solve(scene, tol: float = 1e-6, **kwargs):
         opts["modes"] = checks.check_modes(opts["modes"])
     if "static_correction" in opts:
         opts["static_correction"] = checks.check_flag(opts["static_correction"], "static_correction")
-    tol = checks.check_tol(tol)
-    return _solve(load_scene(scene), tol=tol, **opts)
+    tol, scene, kwargs = checks.check_tol(tol), load_scene(scene), opts
+    return _solve(scene, tol=tol, **kwargs)

@@ -59,9 +59,13 @@ LIMITS: dict[str, Limit] = {
     "materials.poisson": Limit(-1.0, 0.5, "-", "thermodynamic bounds of an isotropic solid; 0.5 "
                                "(incompressible) makes the contact modulus singular", open_low=True, open_high=True),
     "materials.density": Limit(1.0, 3e4, "kg/m^3", "from aerogels (~1) to osmium (22 600)"),
+    "materials.yield_stress": Limit(1e4, 1e11, "Pa", "from soft gels (~10 kPa) to the strongest solids (~100 GPa)"),
     "target.length": Limit(1e-5, 1e3, "m", "a beam from 10 um (MEMS) to 1 km"),
     "target.width": Limit(1e-6, 10.0, "m", "a beam section from 1 um to 10 m"),
     "target.height": Limit(1e-6, 10.0, "m", "a beam section from 1 um to 10 m"),
+    "target.radius": Limit(1e-6, 10.0, "m", "a second ball: as [ball] radius"),
+    "target.mass": Limit(1e-18, 2e8, "kg", "a second ball: as [ball] mass"),
+    "target.thickness": Limit(1e-6, 1.0, "m", "a plate from 1 um to 1 m thick"),
     "target.impact_at": Limit(0.0, 1.0, "-", "a fraction of the length from x = 0", open_low=True),
     "target.omega": Limit(1e-2, 1e10, "rad/s", "structure modes from a 10 min period (slower, a free mass) "
                           "to 1e10 rad/s (above, no continuum mode)"),

@@ -174,7 +174,9 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
         limits.check_name(src, "material name", name, "materials")
         sect = f"materials.{name}"
         _check_keys(src, sect, table, {"young", "poisson", "density"}, set())
-        nu = limits.check_number(src, sect, "poisson", table["poisson"], positive=False)
+        nu = table["poisson"]
+        if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
+            raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
         mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
                               _positive(src, sect, "density", table["density"], "kg/m^3"))
     return mats
