@@ -198,9 +198,12 @@ def scene_cases(d: Path) -> list[Case]:
             ("ball-list", "ball = []\n" + P.split("[ball]")[1].split("[target]", 1)[0].replace("radius", "#") + "[target]\nkind = \"rigid-plate\"\nmaterial = \"steel\"\n", "ball"),
             ("unknown-top", "colour = 1\n" + P, "colour"), ("binary", "\x00\x01\x02\xff", ""),
             ("deep-nesting", "name = " + "[" * 5000 + "]" * 5000 + "\n" + P.replace('name = "hostile_plate"\n', ""), ""),
-            ("malformed", "[ball\n", "TOML")):
+            ("malformed", "[ball\n", "TOML"),
+            ("int-5000-digits", P.replace("radius = 0.01", "radius = 1" + "0" * 5000), "")):
         out.append(Case(f"file-{label}", ["reference", str(d / f"file-{label}.toml"), "--json"], expect="refuse",
                         names=names, files={f"file-{label}.toml": text}))
+    out.append(Case("file-bom", ["reference", str(d / "file-bom.toml"), "--json"], expect="ok",
+                    files={"file-bom.toml": "\ufeff" + P}))
     return out
 
 

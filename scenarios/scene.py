@@ -300,10 +300,14 @@ def load_scene(name_or_path: str | Path) -> Scene:
             what = ("is a directory" if path.is_dir() else "is not a regular file" if path.exists()
                     else "file does not exist")
             raise SceneError(f"{path}: {what} (give a catalogue name or a path to a .toml scene file).")
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")      # a byte-order mark (Windows editors) is dropped
         doc = tomllib.loads(text)
+    except SceneError:
+        raise
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{path}: malformed TOML: {err}.") from None
+    except ValueError as err:       # e.g. an integer literal of more than 4300 digits
+        raise SceneError(f"{path}: malformed TOML: {str(err)[:120]}.") from None
     except RecursionError:
         raise SceneError(f"{path}: malformed TOML: nested too deeply.") from None
     except (OSError, UnicodeDecodeError) as err:

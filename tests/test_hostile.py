@@ -245,6 +245,7 @@ NAMED = [  # (scene text, field named in the refusal) - issue 18's list, then mo
     ('tags = ["a\\nb"]\n' + BASE, "tags"),
     ('description = "a\\u001b[2Jb"\n' + BASE, "description"),
     ("name = " + "[" * 3000 + "]" * 3000 + "\n" + BASE.replace('name = "x"\n', ""), "TOML"),
+    (BASE.replace("radius = 0.01", "radius = 1" + "0" * 5000), "TOML"),
     (BASE.replace("velocity = 1.0", "velocity = 200.0"), "approach"),
     (BEAM.replace("width = 0.01", "width = 2.0"), "width / height"),
     (BEAM.replace("impact_at = 0.5", "impact_at = 1e-300"), "impact_at"),
@@ -259,6 +260,12 @@ def test_named_refusals_exit_2_naming_the_field(tmp_path, text, field):
     assert res.exit_code == 2, res.output
     lines = [l for l in res.output.splitlines() if l.strip() and "compiling" not in l]
     assert len(lines) == 1 and lines[0].startswith("impactval: error:") and field in lines[0], res.output
+
+
+def test_a_byte_order_mark_is_fine(tmp_path):
+    p = tmp_path / "bom.toml"
+    p.write_text("\ufeff" + BASE, encoding="utf-8")
+    assert load_scene(p).name == "x"
 
 
 def test_unknown_tag_lists_the_known_tags():
