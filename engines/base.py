@@ -1,16 +1,42 @@
-"""The engine adapter contract (style.md, patterns 2, 4, 5).
+"""The engine adapter contract (style.md, patterns 2, 4, 5): a small base class owns the shared work.
 
-An adapter builds the scene in one engine and steps it; the base class owns the shared work:
-validation of settings, timing, metrics from the series, and the status (NaN or growing energy
--> "unstable", no force -> "no-contact"). `run_isolated` runs one job in its own process with a
-timeout so a segfault or a hang becomes a status row, never a dead run.
+Two levels (scipy's OdeSolver, xarray's backends):
 
-Contract for a subclass (one module per engine, the engine imported only inside methods):
-1. set `name` (registry key and pip extra), `module` (the Python module to probe),
-   `contacts` (supported contact modes), `integrators` (first one is the default);
-2. implement `_simulate(scene, settings) -> Simulation` (build, then step for the window);
-3. optionally `version()`, `structure_frequencies(scene, settings)`.
-Units are SI. delta > 0 means penetration (approach of the contact points); forces in N.
+**Stepping adapter** (subclass `SteppingAdapter`; most engines). Set the class attributes `name`
+(registry key = pip extra), `module` (the Python module to probe), `contacts` (supported contact
+modes), `integrators` (first = default), `Options` (a frozen dataclass of typed options, see
+`engines.options`), `expected_failures` ({check name: reason}, strict xfails of the conformance
+suite). Import the engine only inside methods. Then implement
+
+- `build(scene, settings) -> model`: a live model at first touch (t = 0, ball at -v0 toward the
+  target); `settings.dt` is a number here (the base resolved "auto"), `settings.options` the typed
+  Options instance of this adapter;
+- `step(model)`: advance one `settings.dt`;
+- `contact(model) -> (delta [m], force [N])`: approach of the contact points (> 0 = overlap) and
+  normal force, for the state after the last step (or, with `sample_lag = 1`, at its start: an engine
+  that reports a step's force with the penetration it was computed from);
+- `energy(model) -> float` [J]: total mechanical energy (ball + contact potential + structure);
+- optionally `kinematics(model) -> (x_ball [m], x_structure [m], v_ball [m/s])` (displacements
+  into the target, ball speed toward it), `frequencies(model) -> array` [rad/s] (the structure
+  model's natural frequencies), `contact_law(scene, settings)`, `plan(scene, settings)` (the predicted
+  stability limit `dt_limit` [s] of the explicit model and its `model_error`, see `Plan`).
+
+The base owns everything else: option parsing, the time step ("auto" = the largest 1-2-5 value
+below both DT_MARGIN * dt_limit and t_plate / STEPS_PER_CONTACT), refusing a dt above the predicted
+limit (status unstable, message with the limit and a suggested dt), the loop, ONE simulation window
+(until the first contact ends, plus `settings.tail`; never beyond WINDOW_CAP rigid-plate contact
+times + tail), timing (build and stepping apart), sampling once per step, divergence (NaN/inf,
+energy growth beyond `energy_growth_limit`, the ball through the target: delta > ball radius), the
+metrics (`contacts_from_series`), and the status with one message table (`MESSAGES`).
+
+**Whole-run adapter** (subclass `EngineAdapter`; engines that integrate a run themselves: Exudyn's
+solvers, batched GPU engines): implement `simulate(scene, settings) -> Simulation` with the series
+sampled per step; the base does the rest the same way. Raise `EngineDiverged` for a blow-up.
+
+`execute_job(spec, scene, settings) -> ImpactResult` runs one job in the current process and never
+raises; `run_isolated` wraps it in a child process with a timeout (until the runner's executor
+takes over). Third-party adapters: an entry point in the group `impactval.engines` or
+"package.module:Class". Units are SI.
 """
 from __future__ import annotations
 
@@ -21,41 +47,87 @@ import multiprocessing as mp
 import signal
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from impactval.engines.options import NoOptions, parse_options
 from impactval.errors import EngineError
-from impactval.reference.result import Contact, ImpactResult
+from impactval.reference.result import Contact, ImpactResult, Status
 
 CONTACT_MODES = ("hertz", "native", "native-hertz")
+#: dt = "auto": the step is at most this fraction of the predicted explicit stability limit
+DT_MARGIN = 0.5
+#: dt = "auto": at least this many steps per rigid-plate Hertz contact time (a lower bound on t_m)
+STEPS_PER_CONTACT = 200
+#: simulation window cap, in rigid-plate Hertz contact times (plus the tail)
+WINDOW_CAP = 200.0
+#: stop stepping when the energy exceeds this multiple of its initial value (classified later)
+STOP_ENERGY_FACTOR = 10.0
+#: entry-point group of third-party adapters
+ENTRY_POINT_GROUP = "impactval.engines"
+
+#: one message per failure reason; formatted with the keywords named in braces
+MESSAGES: dict[str, tuple[Status, str]] = {
+    "not-installed": (Status.NOT_INSTALLED, "{module} is not installed: {hint}"),
+    "skipped": (Status.SKIPPED, "{why}"),
+    "crashed": (Status.CRASHED, "{why}"),
+    "timeout": (Status.TIMEOUT, "no result after {timeout:g} s (dt = {dt})"),
+    "process-died": (Status.CRASHED, "engine process died ({how}) after {elapsed:.1f} s"),
+    "dt-limit": (Status.UNSTABLE, "dt = {dt:.3g} s is above the predicted explicit stability limit "
+                 "dt_limit = 2/omega_max = {limit:.3g} s ({what}); refused before stepping: use dt <= {suggest:.3g} s "
+                 "or dt = auto"),
+    "nan": (Status.UNSTABLE, "NaN/inf after {steps} steps (t = {t:.3g} s, dt = {dt:.3g} s; predicted limit {limit})"),
+    "energy": (Status.UNSTABLE, "energy grew {growth} (limit {allowed:.0%}) at dt = {dt:.3g} s (predicted limit {limit})"),
+    "through": (Status.UNSTABLE, "the ball went through the target (approach {delta:.3g} m > ball radius) after "
+                "{steps} steps at dt = {dt:.3g} s (predicted limit {limit})"),
+    "diverged": (Status.UNSTABLE, "{why}"),
+    "no-contact": (Status.NO_CONTACT, "the ball never touched the target in the simulated window"),
+    "open-contact": (Status.UNSTABLE, "the first contact did not end within the window cap ({cap:.3g} s = "
+                     "{factor:g} rigid-plate contact times + tail)"),
+}
+
+
+def message(reason: str, **kw: Any) -> tuple[Status, str]:
+    """(status, text) of a failure reason from the one table."""
+    status, text = MESSAGES[reason]
+    return status, text.format(**kw)
+
+
+def _limit_text(limit: float) -> str:
+    return f"{limit:.3g} s" if math.isfinite(limit) else "none (implicit)"
+
+
+def _dt_text(dt: Any) -> str:
+    return f"{dt:g} s" if isinstance(dt, (int, float)) else str(dt)
 
 
 @dataclass(frozen=True)
 class EngineSettings:
-    """What to run: `dt` time step [s]; `integrator` (engine's name; None = its default);
-    `contact`: "hertz" (exact law injected every step), "native" (engine's own contact as a linear
-    spring of the paper's k0; for Exudyn the native law is Hertz), "native-hertz" (engine knobs
-    shaped toward Hertz); `segments` (links of a chain beam) and `modes` (modal bodies), None =
-    sized by the reference's mode criterion or the adapter's documented default; `tail` [s] of
-    simulated time after the first contact ends (re-contacts); `timeout_s` [s] for the job;
-    `options`: engine-specific extras as (key, value) pairs, validated by the adapter.
+    """What to run: `dt` time step [s] or "auto" (default: the engine picks, see the module doc);
+    `integrator` (engine's name; None = its default); `contact`: "hertz" (exact law injected every
+    step), "native" (engine's own contact as a linear spring of the paper's k0; for Exudyn the native
+    law is Hertz), "native-hertz" (engine knobs shaped toward Hertz); `segments` (links of a chain
+    beam) and `modes` (modal bodies), None = sized from the scene (engines.chain.segments_for,
+    reference.modechoice); `tail` [s] of simulated time after the first contact ends (re-contacts);
+    `timeout_s` [s] for the job; `options`: engine-specific (key, value) pairs, parsed by the
+    adapter's typed `Options`.
     """
 
-    dt: float = 1e-6
+    dt: float | str = "auto"
     integrator: str | None = None
     contact: str = "hertz"
     segments: int | None = None
     modes: int | None = None
     tail: float = 0.0
     timeout_s: float = 600.0
-    options: tuple[tuple[str, Any], ...] = ()
+    options: Any = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.dt, bool) or not isinstance(self.dt, (int, float)) or not math.isfinite(self.dt) \
-                or not 0 < self.dt <= 1e-2:
-            raise EngineError(f"dt must be a time step in s with 0 < dt <= 1e-2, got {self.dt!r}.")
+        if self.dt != "auto" and (isinstance(self.dt, bool) or not isinstance(self.dt, (int, float))
+                                  or not math.isfinite(self.dt) or not 0 < self.dt <= 1e-2):
+            raise EngineError(f"dt must be a time step in s with 0 < dt <= 1e-2, or 'auto', got {self.dt!r}.")
         if self.contact not in CONTACT_MODES:
             raise EngineError(f"contact must be one of {', '.join(CONTACT_MODES)}, got {self.contact!r}.")
         for key in ("segments", "modes"):
@@ -67,20 +139,43 @@ class EngineSettings:
         if not isinstance(self.timeout_s, (int, float)) or not self.timeout_s > 0:
             raise EngineError(f"timeout_s must be a positive time in s, got {self.timeout_s!r}.")
 
+    @property
+    def auto_dt(self) -> bool:
+        return self.dt == "auto"
+
     def option(self, key: str, default: Any = None) -> Any:
-        return dict(self.options).get(key, default)
+        """An option's value: from the typed Options instance (after parsing) or the raw pairs."""
+        if isinstance(self.options, tuple):
+            return dict(self.options).get(key, default)
+        return getattr(self.options, key, default)
 
     def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["options"] = dict(self.options)
+        d = asdict(self) if isinstance(self.options, tuple) else {**asdict(replace(self, options=())),
+                                                                   "options": asdict(self.options)}
+        if isinstance(self.options, tuple):
+            d["options"] = dict(self.options)
         return d
 
 
 @dataclass
+class Plan:
+    """What an adapter predicts before stepping: `dt_limit` [s] (2/omega_max of the discretised
+    structure + ball + contact spring at its tangent stiffness at f_m; inf for an unconditionally
+    stable scheme), `what` (one line: which model the limit is for), `model_error` (the structure
+    model's own relative discretisation error, NaN if unknown), `diagnostics`."""
+
+    dt_limit: float = math.inf
+    what: str = ""
+    model_error: float = math.nan
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
 class Simulation:
-    """What `_simulate` returns: series sampled once per step (t [s], delta [m], f [N], ball and
+    """What `simulate` returns: series sampled once per step (t [s], delta [m], f [N], ball and
     contact-point displacement [m], ball velocity [m/s] toward the target, energy [J] or empty),
-    wall times [s], step count, and diagnostics (e.g. structure_frequencies)."""
+    wall times [s], step count, the model's name and diagnostics; `stop` names a divergence reason
+    found while stepping ("nan", "energy", "through") or is ""."""
 
     t: np.ndarray
     delta: np.ndarray
@@ -95,6 +190,9 @@ class Simulation:
     model: str = ""
     diagnostics: dict[str, Any] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
+    stop: str = ""
+    frequencies: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_law: Any = None
 
 
 class EngineDiverged(Exception):
@@ -105,25 +203,68 @@ class EngineDiverged(Exception):
         self.diagnostics = diagnostics or {}
 
 
+def nice_step(dt: float) -> float:
+    """The largest 1-2-5 x 10^k value <= dt (readable steps in rows)."""
+    e = math.floor(math.log10(dt))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10.0**e <= dt * (1 + 1e-12):
+            return m * 10.0**e
+    return 10.0 ** (e - 1) * 5.0
+
+
+def plate_times(scene):
+    from impactval.reference.hertz import plate_impact
+
+    return plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+
+
 class EngineAdapter:
-    """Base class; see the module docstring for the contract."""
+    """Base class of every adapter; the module docstring is the contract."""
 
     name: str = ""
     module: str = ""
     contacts: tuple[str, ...] = ("hertz",)
     integrators: tuple[str, ...] = ()
+    Options: type = NoOptions
     #: energy may grow by at most this fraction before a run is classed "unstable"
     energy_growth_limit: float = 0.05
-    #: known gaps, by check name -> reason (become xfail in the conformance suite)
+    #: known gaps, by check name -> reason (become strict xfails in the conformance suite)
     expected_failures: dict[str, str] = {}
 
     # ------------------------------------------------------------------ to override
-    def _simulate(self, scene, settings: EngineSettings) -> Simulation:  # pragma: no cover - abstract
+    def simulate(self, scene, settings: EngineSettings) -> Simulation:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def plan(self, scene, settings: EngineSettings) -> Plan:
+        """Predicted stability limit and model error (default: ball on the contact spring, rigid target)."""
+        law = self.contact_law(scene, settings)
+        if law is None or not self.explicit(settings):
+            return Plan()
+        p = plate_times(scene)
+        k = law.stiffness(p.delta_m)
+        return Plan(2.0 / math.sqrt(k / scene.ball.mass), "ball on the contact spring's tangent stiffness at f_m")
+
+    def explicit(self, settings: EngineSettings) -> bool:
+        """True when the integrator has a stability limit (default: yes)."""
+        return True
+
+    def contact_law(self, scene, settings: EngineSettings):
+        """The normal contact law this run uses (`reference.hertz.ContactLaw`), None if not a pure power law."""
+        from impactval.reference.hertz import ContactLaw
+
+        if settings.contact == "hertz":
+            return ContactLaw.hertz(scene.alpha)
+        if settings.contact == "native":
+            return ContactLaw.linear(plate_times(scene).k0)
+        return ContactLaw.hertz(scene.alpha)
 
     def version(self) -> str:
         mod = importlib.import_module(self.module)
         return str(getattr(mod, "__version__", "unknown"))
+
+    def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
+        """Natural frequencies [rad/s] of the engine's structure model (empty for a rigid target)."""
+        return np.zeros(0)
 
     # ------------------------------------------------------------------ shared
     def available(self) -> bool:
@@ -132,27 +273,62 @@ class EngineAdapter:
     def install_hint(self) -> str:
         return f"pip install 'impactval[{self.name}]'"
 
-    def check_settings(self, settings: EngineSettings) -> None:
+    def parse(self, settings: EngineSettings) -> EngineSettings:
+        """The settings with `options` parsed into this adapter's typed Options (EngineError if bad)."""
+        if not isinstance(settings.options, tuple):
+            return settings
+        return replace(settings, options=parse_options(self.Options, settings.options, self.name))
+
+    def check_settings(self, settings: EngineSettings) -> EngineSettings:
+        """Validate settings for this adapter (EngineError naming the field and what is allowed)."""
         if settings.contact not in self.contacts:
             raise EngineError(f"{self.name} does not support contact {settings.contact!r}; "
                               f"supported: {', '.join(self.contacts)}.")
         if settings.integrator is not None and self.integrators and settings.integrator not in self.integrators:
             raise EngineError(f"{self.name}: unknown integrator {settings.integrator!r}; "
                               f"known: {', '.join(self.integrators)}.")
+        return self.parse(settings)
+
+    def resolve_dt(self, scene, settings: EngineSettings, plan: Plan) -> float:
+        """The step: settings.dt, or for "auto" the largest 1-2-5 value <= DT_MARGIN * dt_limit and
+        <= t_plate / STEPS_PER_CONTACT."""
+        if not settings.auto_dt:
+            return float(settings.dt)
+        cap = plate_times(scene).t_m / STEPS_PER_CONTACT
+        if math.isfinite(plan.dt_limit):
+            cap = min(cap, DT_MARGIN * plan.dt_limit)
+        return nice_step(cap)
 
     def run(self, scene, settings: EngineSettings) -> ImpactResult:
-        """Build and step the scene in this process; failures become statuses. Never overridden."""
+        """Plan, build and step the scene in this process; failures become statuses. Never overridden."""
         if not self.available():
-            return ImpactResult.failed(scene.name, self.name, "not-installed",
-                                       f"{self.module} is not installed: {self.install_hint()}",
-                                       settings=settings.as_dict())
-        self.check_settings(settings)
+            status, text = message("not-installed", module=self.module, hint=self.install_hint())
+            return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict())
+        settings = self.check_settings(settings)
+        plan = self.plan(scene, settings)
+        dt = self.resolve_dt(scene, settings, plan)
+        law = self.contact_law(scene, settings)
+        common = dict(version=self._safe_version(), dt=dt, dt_limit=plan.dt_limit, model_error=plan.model_error,
+                      contact_law=law)
+        if math.isfinite(plan.dt_limit) and dt > plan.dt_limit:
+            status, text = message("dt-limit", dt=dt, limit=plan.dt_limit, what=plan.what,
+                                   suggest=nice_step(DT_MARGIN * plan.dt_limit))
+            return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict(),
+                                       diagnostics=dict(plan.diagnostics), **common)
+        settings = replace(settings, dt=dt)
         try:
-            sim = self._simulate(scene, settings)
+            sim = self.simulate(scene, settings)
         except EngineDiverged as err:
-            return ImpactResult.failed(scene.name, self.name, "unstable", str(err), settings=settings.as_dict(),
-                                       version=self._safe_version(), diagnostics=getattr(err, "diagnostics", {}))
-        return self.result_from(scene, settings, sim)
+            why = str(err)
+            if math.isfinite(plan.dt_limit) and "limit" not in why:
+                why += f" (predicted stability limit {plan.dt_limit:.3g} s)"
+            status, text = message("diverged", why=why)
+            return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict(),
+                                       diagnostics={**plan.diagnostics, **err.diagnostics}, **common)
+        sim.diagnostics = {**plan.diagnostics, **sim.diagnostics}
+        if sim.frequencies.size and "structure_frequencies" not in sim.diagnostics:
+            sim.diagnostics["structure_frequencies"] = [float(x) for x in sim.frequencies]
+        return self.result_from(scene, settings, sim, plan, sim.contact_law or law)
 
     def _safe_version(self) -> str:
         try:
@@ -160,40 +336,153 @@ class EngineAdapter:
         except Exception:  # noqa: BLE001 - a version string is never worth a failed run
             return "unknown"
 
-    def result_from(self, scene, settings: EngineSettings, sim: Simulation) -> ImpactResult:
+    def result_from(self, scene, settings: EngineSettings, sim: Simulation, plan: Plan | None = None,
+                    law=None) -> ImpactResult:
         """Metrics, status and message from a Simulation's series."""
+        plan = plan or Plan()
+        dt = float(settings.dt)
+        lim = _limit_text(plan.dt_limit)
         common = dict(version=self._safe_version(), settings={**settings.as_dict(), **sim.settings},
                       n_steps=sim.n_steps, wall_time_build_s=sim.build_s, wall_time_step_s=sim.step_s,
-                      diagnostics=sim.diagnostics, model=sim.model)
+                      diagnostics=sim.diagnostics, model=sim.model, dt=dt, dt_limit=plan.dt_limit,
+                      model_error=plan.model_error, contact_law=law)
+
+        def failed(reason: str, **kw: Any) -> ImpactResult:
+            status, text = message(reason, **kw)
+            return ImpactResult.failed(scene.name, self.name, status, text, **common)
+
         t, d, f = (np.asarray(a, float) for a in (sim.t, sim.delta, sim.f))
         finite = np.isfinite(d) & np.isfinite(f)
-        if not finite.all():
-            k = int(np.argmin(finite))
-            return ImpactResult.failed(scene.name, self.name, "unstable",
-                                       f"NaN/inf after {k} steps (t = {t[k]:.3g} s, dt = {settings.dt:g} s)", **common)
+        if sim.stop == "nan" or not finite.all():
+            k = int(np.argmin(finite)) if not finite.all() else len(t) - 1
+            return failed("nan", steps=k, t=float(t[k]) if len(t) else math.nan, dt=dt, limit=lim)
         e = np.asarray(sim.energy, float)
         if e.size and e[0] > 0:
             growth = float(np.max(e) / e[0] - 1.0)
-            if growth > self.energy_growth_limit:
-                return ImpactResult.failed(scene.name, self.name, "unstable",
-                                           f"energy grew {_growth_text(growth)} (limit {self.energy_growth_limit:.0%}) "
-                                           f"at dt = {settings.dt:g} s", **common)
+            if sim.stop == "energy" or growth > self.energy_growth_limit or not np.all(np.isfinite(e)):
+                return failed("energy", growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt,
+                              limit=lim)
+        if sim.stop == "through":
+            return failed("through", delta=float(np.max(d)), steps=sim.n_steps, dt=dt, limit=lim)
         contacts = contacts_from_series(t, d, f)
         if not contacts:
-            return ImpactResult.failed(scene.name, self.name, "no-contact",
-                                       "the ball never touched the target in the simulated window", **common)
+            return failed("no-contact")
         first = contacts[0]
         if not math.isfinite(first.t_end):
-            return ImpactResult.failed(scene.name, self.name, "unstable",
-                                       "the first contact did not end in the simulated window", **common)
+            cap = WINDOW_CAP * plate_times(scene).t_m + settings.tail
+            return failed("open-contact", cap=cap, factor=WINDOW_CAP)
         end_idx = int(np.searchsorted(t, first.t_end))
         v = np.asarray(sim.v_ball, float)
-        rebound = -float(v[min(end_idx, len(v) - 1)]) if v.size else math.nan
+        rebound = -float(v[min(end_idx, len(v) - 1)]) if v.size and np.isfinite(v).any() else math.nan
         energy_error = float(np.max(np.abs(e / e[0] - 1.0))) if e.size and e[0] > 0 else math.nan
         return ImpactResult(scene=scene.name, source=self.name, t_m=first.t_end - first.t_start, f_m=first.f_max,
                             delta_m=first.delta_max, t=t, f=f, delta=d, x_ball=np.asarray(sim.x_ball, float),
                             x_structure=np.asarray(sim.x_structure, float), energy=e, rebound_velocity=rebound,
-                            energy_error=energy_error, contacts=contacts, status="ok", **common)
+                            energy_error=energy_error, contacts=contacts, status=Status.OK, **common)
+
+
+class SteppingAdapter(EngineAdapter):
+    """An adapter that steps: implement build/step/contact/energy (module docstring); the base loops."""
+
+    #: 1 when contact/energy/kinematics after step k describe the state at the start of that step (an engine
+    #: that reports a step's force with the penetration it was computed from, e.g. Bullet); 0 = after it
+    sample_lag: int = 0
+
+    def build(self, scene, settings: EngineSettings) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def step(self, model: Any) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def contact(self, model: Any) -> tuple[float, float]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def energy(self, model: Any) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def kinematics(self, model: Any) -> tuple[float, float, float]:
+        """(x_ball [m], x_structure [m], v_ball [m/s]); NaN when the adapter does not say."""
+        return math.nan, math.nan, math.nan
+
+    def frequencies(self, model: Any) -> np.ndarray:
+        return np.zeros(0)
+
+    def describe(self, model: Any) -> str:
+        """The model's name for rows (e.g. "hencky-chain-81")."""
+        return ""
+
+    def close(self, model: Any) -> None:
+        """Release the model's resources (called once, also after a failure)."""
+
+    def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
+        settings = self.check_settings(settings)
+        if settings.auto_dt:
+            settings = replace(settings, dt=self.resolve_dt(scene, settings, self.plan(scene, settings)))
+        model = self.build(scene, settings)
+        try:
+            return np.asarray(self.frequencies(model), float)
+        finally:
+            self.close(model)
+
+    def simulate(self, scene, settings: EngineSettings) -> Simulation:
+        """The loop: sample, step, sample ... until the first contact ends plus the tail (one rule)."""
+        dt = float(settings.dt)
+        plate = plate_times(scene)
+        t_cap = WINDOW_CAP * plate.t_m + settings.tail
+        n_max = int(math.ceil(t_cap / dt))
+        through = scene.ball.radius
+        t0 = time.perf_counter()
+        model = self.build(scene, settings)
+        try:
+            build_s = time.perf_counter() - t0
+            freqs = np.asarray(self.frequencies(model), float)
+            cols: list[tuple[float, ...]] = []
+            step, contact, energy, kin = self.step, self.contact, self.energy, self.kinematics
+
+            lag = self.sample_lag
+
+            def sample(k: int) -> tuple[float, float, float]:
+                d, f = contact(model)
+                e = energy(model)
+                cols.append(((k - lag) * dt, d, f, *kin(model), e))
+                return d, f, e
+
+            step_s, k = 0.0, 0
+            if lag:                # the first step's report describes the initial state
+                ts = time.perf_counter()
+                step(model)
+                step_s += time.perf_counter() - ts
+                k = 1
+            _, _, e0 = sample(k)
+            touched, t_end, stop = False, math.inf, ""
+            while k < n_max:
+                ts = time.perf_counter()
+                step(model)
+                step_s += time.perf_counter() - ts
+                k += 1
+                d, f, e = sample(k)
+                if not (math.isfinite(d) and math.isfinite(f) and math.isfinite(e)):
+                    stop = "nan"
+                    break
+                if e > STOP_ENERGY_FACTOR * e0:
+                    stop = "energy"
+                    break
+                if d > through:
+                    stop = "through"
+                    break
+                if f > 0:
+                    touched = True
+                elif touched and d <= 0 and t_end == math.inf:
+                    t_end = (k - lag) * dt
+                    n_max = min(n_max, k + int(math.ceil(settings.tail / dt)))
+            arr = np.asarray(cols, float).reshape(-1, 7)
+            sim = Simulation(t=arr[:, 0], delta=arr[:, 1], f=arr[:, 2], x_ball=arr[:, 3], x_structure=arr[:, 4],
+                             v_ball=arr[:, 5], energy=arr[:, 6], build_s=build_s, step_s=step_s, n_steps=k,
+                             model=self.describe(model), stop=stop, frequencies=freqs)
+        finally:
+            self.close(model)
+        sim.diagnostics = dict(getattr(model, "diagnostics", {}) or {})     # close() may add to them
+        return sim
 
 
 def _growth_text(growth: float) -> str:
@@ -252,17 +541,87 @@ def contacts_from_series(t: np.ndarray, delta: np.ndarray, f: np.ndarray) -> tup
     return tuple(out)
 
 
-# ---------------------------------------------------------------------------- isolation
+# ---------------------------------------------------------------------------- loading and jobs
 
-def load_adapter(spec: str) -> EngineAdapter:
-    """An adapter from a registry name ("mujoco") or an import path ("pkg.module:Class")."""
+def _entry_points() -> dict[str, Any]:
+    try:
+        from importlib.metadata import entry_points
+
+        return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    except Exception:  # noqa: BLE001 - broken metadata means no third-party engines
+        return {}
+
+
+def adapter_class(spec: str) -> type:
+    """The adapter class of a registry name ("mujoco"), an entry point of the group
+    `impactval.engines`, or an import path "package.module:Class"; EngineError otherwise."""
     from impactval.engines import ENGINES
 
-    path = ENGINES.get(spec, spec)
-    if ":" not in path:
-        raise EngineError(f"unknown engine {spec!r}; known: {', '.join(ENGINES)}.")
-    mod, cls = path.split(":", 1)
-    return getattr(importlib.import_module(mod), cls)()
+    if not isinstance(spec, str) or not spec.strip():
+        raise EngineError(f"engine names must be non-empty strings, got {spec!r}.")
+    if spec in ENGINES:
+        path = ENGINES[spec]
+    elif spec in (eps := _entry_points()):
+        try:
+            cls = eps[spec].load()
+        except Exception as err:  # noqa: BLE001 - a broken plug-in is bad input, not a crash of the run
+            raise EngineError(f"engine {spec!r} (entry point {eps[spec].value}) cannot be loaded: "
+                              f"{type(err).__name__}: {err}") from None
+        return _checked(spec, cls)
+    elif ":" in spec and all(spec.split(":", 1)):
+        path = spec
+    else:
+        known = ", ".join([*ENGINES, *_entry_points()])
+        raise EngineError(f"unknown engine {spec!r}; known: {known}, or an adapter as 'package.module:Class'.")
+    mod, _, cls_name = path.partition(":")
+    try:
+        module = importlib.import_module(mod)
+    except Exception as err:  # noqa: BLE001
+        raise EngineError(f"engine {spec!r}: cannot import module {mod!r}: {type(err).__name__}: {err}") from None
+    cls = getattr(module, cls_name, None)
+    if cls is None:
+        raise EngineError(f"engine {spec!r}: module {mod!r} has no {cls_name!r}.")
+    return _checked(spec, cls)
+
+
+def _checked(spec: str, cls: Any) -> type:
+    if not (isinstance(cls, type) and issubclass(cls, EngineAdapter)):
+        raise EngineError(f"engine {spec!r} is not an impactval EngineAdapter subclass (got {cls!r}).")
+    return cls
+
+
+def load_adapter(spec: str) -> EngineAdapter:
+    """An adapter instance from a registry name, entry point or "pkg.module:Class" (see adapter_class)."""
+    return adapter_class(spec)()
+
+
+def execute_job(spec: str, scene, settings: EngineSettings) -> ImpactResult:
+    """Run one engine job in this process; never raises (every failure is a status row):
+    unknown/unsupported -> skipped, missing engine -> not-installed, exceptions -> crashed."""
+    name = spec.split(":")[-1] if ":" in spec else spec
+    try:
+        adapter = load_adapter(spec)
+    except EngineError as err:
+        return ImpactResult.failed(scene.name, name, Status.SKIPPED, str(err), settings=_settings_dict(settings))
+    except Exception as err:  # noqa: BLE001
+        return ImpactResult.failed(scene.name, name, Status.CRASHED, f"cannot load adapter: {type(err).__name__}: {err}",
+                                   settings=_settings_dict(settings))
+    try:
+        return adapter.run(scene, settings)
+    except EngineError as err:      # the scene/settings combination is not supported by this engine
+        return ImpactResult.failed(scene.name, adapter.name or name, Status.SKIPPED, str(err),
+                                   settings=_settings_dict(settings))
+    except Exception as err:  # noqa: BLE001 - every failure must become a row
+        tb = traceback.format_exc(limit=6)
+        return ImpactResult.failed(scene.name, adapter.name or name, Status.CRASHED, f"{type(err).__name__}: {err}",
+                                   settings=_settings_dict(settings), diagnostics={"traceback": tb})
+
+
+def _settings_dict(settings) -> dict[str, Any]:
+    try:
+        return settings.as_dict()
+    except Exception:  # noqa: BLE001
+        return {}
 
 
 def _quiet_stdout() -> None:
@@ -284,20 +643,13 @@ def _quiet_stdout() -> None:
 
 def _child(spec: str, scene, settings: EngineSettings, conn) -> None:
     _quiet_stdout()
-    try:
-        res = load_adapter(spec).run(scene, settings)
-    except EngineError as err:      # the scene/settings combination is not supported by this engine
-        res = ImpactResult.failed(scene.name, spec, "skipped", str(err), settings=settings.as_dict())
-    except Exception as err:  # noqa: BLE001 - every failure must become a row
-        tb = traceback.format_exc(limit=4)
-        res = ImpactResult.failed(scene.name, spec, "crashed", f"{type(err).__name__}: {err}",
-                                  settings=settings.as_dict(), diagnostics={"traceback": tb})
-    conn.send(res)
+    conn.send(execute_job(spec, scene, settings))
     conn.close()
 
 
 def run_isolated(spec: str, scene, settings: EngineSettings) -> ImpactResult:
-    """Run one engine job in its own process; a crash, hang or kill becomes a status row."""
+    """`execute_job` in its own process with settings.timeout_s; a crash, hang or kill becomes a status
+    row. (A thin wrapper until the runner's executor owns isolation.)"""
     name = spec.split(":")[-1] if ":" in spec else spec
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe(duplex=False)
@@ -320,15 +672,15 @@ def run_isolated(spec: str, scene, settings: EngineSettings) -> ImpactResult:
         return result
     elapsed = time.perf_counter() - t0
     if elapsed >= settings.timeout_s:
-        return ImpactResult.failed(scene.name, name, "timeout",
-                                   f"no result after {settings.timeout_s:g} s (dt = {settings.dt:g} s)",
-                                   settings=settings.as_dict())
-    code = proc.exitcode
-    how = (f"killed by signal {signal.Signals(-code).name}" if code is not None and code < 0
-           else f"exit code {code}")
-    return ImpactResult.failed(scene.name, name, "crashed", f"engine process died ({how}) after {elapsed:.1f} s",
-                               settings=settings.as_dict())
+        status, text = message("timeout", timeout=settings.timeout_s, dt=_dt_text(settings.dt))
+    else:
+        code = proc.exitcode
+        how = (f"killed by signal {signal.Signals(-code).name}" if code is not None and code < 0
+               else f"exit code {code}")
+        status, text = message("process-died", how=how, elapsed=elapsed)
+    return ImpactResult.failed(scene.name, name, status, text, settings=settings.as_dict())
 
 
-__all__ = ["EngineAdapter", "EngineSettings", "Simulation", "EngineDiverged",
-           "contacts_from_series", "run_isolated", "load_adapter", "CONTACT_MODES"]
+__all__ = ["EngineAdapter", "SteppingAdapter", "EngineSettings", "Simulation", "Plan", "EngineDiverged",
+           "contacts_from_series", "execute_job", "run_isolated", "load_adapter", "adapter_class", "CONTACT_MODES",
+           "MESSAGES", "message", "DT_MARGIN", "STEPS_PER_CONTACT", "WINDOW_CAP", "nice_step"]

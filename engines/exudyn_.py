@@ -59,7 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from impactval.engines.base import EngineAdapter, EngineDiverged, EngineSettings, Simulation, contacts_from_series
+from impactval.engines.base import (WINDOW_CAP, EngineAdapter, EngineDiverged, EngineSettings, Plan, Simulation,
+                                    contacts_from_series)
+from impactval.engines.options import boolean, in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
 from impactval.reference.hertz import plate_impact
 
@@ -67,33 +69,63 @@ from impactval.reference.hertz import plate_impact
 SOLVERS = {"generalized-alpha": "GeneralizedAlpha", "trapezoidal": "TrapezoidalIndex2",
            "explicit-euler": "ExplicitEuler", "rk44": "RK44", "rk67": "RK67", "dopri5": "DOPRI5", "ode23": "ODE23"}
 IMPLICIT = ("generalized-alpha", "trapezoidal")
+#: fixed-step explicit solvers (a stability limit applies; dopri5/ode23 control their own step)
+EXPLICIT = ("explicit-euler", "rk44", "rk67")
 AUTOMATIC_STEP = ("dopri5", "ode23")
 BEAM_MODELS = ("fem", "reference-modes")
 LAWS = ("hertz", "linear")
-#: option key -> one-line description (validated in check_settings)
-OPTIONS = {
-    "beam_model": "'fem' (default) or 'reference-modes'",
-    "law": "'hertz' (default) or 'linear' (k0 = 0.8 alpha sqrt(delta_m), exponent 1)",
-    "user_function": "'symbolic' (default) or 'python' (contact 'hertz' only)",
-    "spectral_radius": "generalized-alpha spectral radius in [0, 1] (default 1)",
-    "rtol": "relative tolerance of dopri5/ode23 in [1e-13, 1) (default 1e-8)",
-    "atol": "absolute tolerance [m, m/s] of dopri5/ode23, >= 1e-18 (default rtol * 1e-3 * plate delta_m)",
-    "adaptive_step": "True: implicit solvers may cut the step when Newton fails (default False)",
-    "fe_elements": "FE mesh (nx, ny, nz) hexahedra (default: element length = beam height, 1 x 1 section)",
-    "cache": "True (default): cache FE models on disk",
-}
+
+
+def _fe_elements(value):
+    from impactval.engines.options import whole_numbers
+
+    return whole_numbers(3)(value)
+
+
+def _tol_check(low: float):
+    from impactval.engines.options import in_range
+
+    return in_range(low, 1.0, high_open=True)
+
+
+@dataclass(frozen=True)
+class ExudynOptions:
+    """`--option exudyn.KEY=VALUE`."""
+
+    beam_model: str = option("fem", "'fem' (default) or 'reference-modes'", one_of(*BEAM_MODELS))
+    law: str = option("hertz", "'hertz' (default) or 'linear' (k0 = 0.8 alpha sqrt(delta_m), exponent 1)", one_of(*LAWS))
+    user_function: str = option("symbolic", "'symbolic' (default) or 'python' (contact 'hertz' only)",
+                                one_of("symbolic", "python"))
+    spectral_radius: float = option(1.0, "generalized-alpha spectral radius in [0, 1] (default 1)", in_range(0.0, 1.0))
+    rtol: float = option(1e-8, "relative tolerance of dopri5/ode23 in [1e-13, 1) (default 1e-8)", _tol_check(1e-13))
+    atol: float | None = option(None, "absolute tolerance [m, m/s] of dopri5/ode23, >= 1e-18 (default rtol * 1e-3 * "
+                                "plate delta_m)", _tol_check(1e-18))
+    adaptive_step: bool = option(False, "True: implicit solvers may cut the step when Newton fails (default False)",
+                                 boolean)
+    fe_elements: tuple[int, int, int] | None = option(None, "FE mesh 'nx,ny,nz' hexahedra (default: element length = "
+                                                      "beam height, 1 x 1 section)", _fe_elements)
+    cache: bool = option(True, "True (default): cache FE models on disk", boolean)
+    contact_stiffness: float | None = option(None, "contact stiffness [N/m^exponent] (default alpha, or k0 with "
+                                             "law=linear)", positive)
+    contact_exponent: float | None = option(None, "contact stiffness exponent (default 1.5, or 1 with law=linear)",
+                                            in_range(1.0, 3.0))
+    contact_damping: float = option(0.0, "contact damping [N s/m] (default 0)", non_negative)
+    mode_tol: float = option(1e-2, "relative tolerance the automatic mode count aims at (default 1e-2)",
+                             in_range(1e-4, 0.2))
+
+
 #: most beam modes chosen automatically (the cost per step grows ~ n^2, the FE build faster)
 MAX_DEFAULT_MODES = 60
 #: relative truncation error the automatic mode count aims at (first-order estimate, per metric)
 DEFAULT_MODE_TOL = 1e-2
 #: simulated window: starts at this many rigid-plate contact times, doubled until the contact ends
-WINDOW_START, WINDOW_MAX = 2.5, 160.0
+WINDOW_START, WINDOW_MAX = 2.5, WINDOW_CAP
 FRAME_MASS = 1e12
 
 
-def default_modes(scene) -> int:
+def default_modes(scene, tol: float = DEFAULT_MODE_TOL) -> int:
     """Beam mode count when settings.modes is None: the scene's own `modes`, else the reference's mode
-    criterion for a plain n-mode model (`reference.modechoice.required_modes(scene, 1e-2)
+    criterion for a plain n-mode model (`reference.modechoice.required_modes(scene, tol)
     .count_without_residual`: the dropped modes shift t_m, f_m, delta_m by < 1 %, first order;
     43 for the worked beam), at least 4 and at most MAX_DEFAULT_MODES.
     """
@@ -102,7 +134,7 @@ def default_modes(scene) -> int:
     target = scene.target
     if getattr(target, "modes", None):
         return int(target.modes)
-    n = required_modes(scene, DEFAULT_MODE_TOL).count_without_residual
+    n = required_modes(scene, tol).count_without_residual
     return int(min(max(n, 4), MAX_DEFAULT_MODES))
 
 
@@ -139,32 +171,64 @@ class ExudynAdapter(EngineAdapter):
     }
 
     # ------------------------------------------------------------------ settings
-    def check_settings(self, settings: EngineSettings) -> None:
-        super().check_settings(settings)
-        opts = dict(settings.options)
-        unknown = set(opts) - set(OPTIONS)
-        if unknown:
-            known = "; ".join(f"{k}: {v}" for k, v in OPTIONS.items())
-            raise EngineError(f"exudyn: unknown option {sorted(unknown)[0]!r}; known options: {known}.")
-        for key, allowed in (("beam_model", BEAM_MODELS), ("law", LAWS), ("user_function", ("symbolic", "python"))):
-            if key in opts and opts[key] not in allowed:
-                raise EngineError(f"exudyn: option {key} must be one of {', '.join(allowed)}, got {opts[key]!r}.")
-        sr = opts.get("spectral_radius", 1.0)
-        if isinstance(sr, bool) or not isinstance(sr, (int, float)) or not 0.0 <= sr <= 1.0:
-            raise EngineError(f"exudyn: option spectral_radius must be a number in [0, 1], got {sr!r}.")
-        # below these the error test cannot be met in double precision and DOPRI5 never finishes
-        for key, low in (("rtol", 1e-13), ("atol", 1e-18)):
-            v = opts.get(key)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not low <= v < 1):
-                raise EngineError(f"exudyn: option {key} must be a number in [{low:g}, 1), got {v!r}.")
-        el = opts.get("fe_elements")
-        if el is not None and (not isinstance(el, (tuple, list)) or len(el) != 3
-                               or not all(isinstance(e, int) and not isinstance(e, bool) and e >= 1 for e in el)):
-            raise EngineError(f"exudyn: option fe_elements must be three positive whole numbers (nx, ny, nz), "
-                              f"got {el!r}.")
+    Options = ExudynOptions
+
+    def check_settings(self, settings: EngineSettings) -> EngineSettings:
+        return super().check_settings(settings)
+
+    def explicit(self, settings: EngineSettings) -> bool:
+        return (settings.integrator or self.integrators[0]) in EXPLICIT
+
+    def contact_law(self, scene, settings: EngineSettings):
+        from impactval.reference.hertz import ContactLaw
+
+        stiffness, exponent = _law_numbers(scene, settings)
+        if settings.option("contact_damping", 0.0):
+            return None
+        if exponent == 1.5:
+            return ContactLaw.hertz(stiffness)
+        if exponent == 1.0:
+            return ContactLaw.linear(stiffness)
+        return None
+
+    def plan(self, scene, settings: EngineSettings) -> Plan:
+        """Model error of the modal body (the reference on its own modes vs the continuum) and, for the
+        explicit integrators, the stability limit of the modes + ball + contact spring."""
+        from impactval.engines.chain import modal_omega_max
+        from impactval.reference.hertz import ContactLaw
+
+        structure = self._structure(scene, settings)
+        diag: dict = {}
+        err = 0.0 if structure is None else math.nan
+        if structure is not None and scene.target.kind == "beam":
+            me = modal_model_error(scene, structure)
+            err = max(abs(x) for x in me)
+            diag.update(model_error_t_m=me[0], model_error_f_m=me[1], model_error_delta_m=me[2])
+        if not self.explicit(settings):
+            return Plan(math.inf, "implicit integrator", err, diag)
+        law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
+        k = law.stiffness(plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).delta_m)
+        if structure is None:
+            om = math.sqrt(k / scene.ball.mass)
+        else:
+            om = modal_omega_max(structure.omega, np.diag(structure.mass_reduced), structure.phi_contact,
+                                 scene.ball.mass, k)
+        integ = settings.integrator or self.integrators[0]
+        bound = {"explicit-euler": 2.0, "rk44": 2.0 * math.sqrt(2.0), "rk67": 3.0}.get(integ, 2.0)
+        return Plan(bound / om, f"{integ}, modal body + ball + contact spring {k:.3g} N/m", err, diag)
 
     # ------------------------------------------------------------------ structure
     def _structure(self, scene, settings: EngineSettings) -> _Structure | None:
+        key = (scene, settings.modes, settings.option("beam_model", "fem"), settings.option("fe_elements"),
+               settings.option("mode_tol", DEFAULT_MODE_TOL))
+        memo = getattr(self, "_memo", None)
+        if memo is not None and memo[0] == key:
+            return memo[1]
+        s = self._make_structure(scene, settings)
+        self._memo = (key, s)
+        return s
+
+    def _make_structure(self, scene, settings: EngineSettings) -> _Structure | None:
         target = scene.target
         if target.kind == "rigid-plate":
             return None
@@ -172,18 +236,18 @@ class ExudynAdapter(EngineAdapter):
             return _modal_target_structure(scene)
         if target.kind != "beam":
             raise EngineError(f"exudyn: target kind {target.kind!r} is not supported (rigid-plate, beam, modal are).")
-        n = settings.modes or default_modes(scene)
+        n = settings.modes or default_modes(scene, float(settings.option("mode_tol", DEFAULT_MODE_TOL)))
         if settings.option("beam_model", "fem") == "reference-modes":
             return _reference_modes_structure(target, n)
         return _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
 
     def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
         """The body's bending frequencies [rad/s] (empty for a rigid plate)."""
-        s = self._structure(scene, settings)
+        s = self._structure(scene, self.check_settings(settings))
         return np.zeros(0) if s is None else s.omega.copy()
 
     # ------------------------------------------------------------------ simulation
-    def _simulate(self, scene, settings: EngineSettings) -> Simulation:
+    def simulate(self, scene, settings: EngineSettings) -> Simulation:
         t0 = time.perf_counter()
         structure = self._structure(scene, settings)
         plan_s = time.perf_counter() - t0
@@ -199,6 +263,13 @@ class ExudynAdapter(EngineAdapter):
             window *= 2.0
         sim.build_s += plan_s
         sim.diagnostics["window_s"] = window
+        if done:      # the one window rule (engines.base): the first contact's end plus the tail
+            keep = int(np.searchsorted(sim.t, contacts[0].t_end + settings.tail - 1e-15)) + 1
+            for key in ("t", "delta", "f", "x_ball", "x_structure", "v_ball", "energy"):
+                arr = getattr(sim, key)
+                if len(arr) > keep:
+                    setattr(sim, key, arr[:keep])
+        sim.frequencies = np.zeros(0) if structure is None else np.asarray(structure.omega, float)
         return sim
 
     def _run_window(self, scene, settings: EngineSettings, structure: _Structure | None, plate,
@@ -210,10 +281,7 @@ class ExudynAdapter(EngineAdapter):
         tb = time.perf_counter()
         ball = scene.ball
         law = settings.option("law", "hertz")
-        if law == "linear":
-            stiffness, exponent = plate.k0, 1.0
-        else:
-            stiffness, exponent = scene.alpha, 1.5
+        stiffness, exponent = _law_numbers(scene, settings)
         sc = exu.SystemContainer()
         mbs = sc.AddSystem()
         ground = mbs.AddObject(eii.ObjectGround())
@@ -313,7 +381,7 @@ class ExudynAdapter(EngineAdapter):
             rtol = float(settings.option("rtol", 1e-8))
             ti.automaticStepSize = True
             ti.relativeTolerance = rtol
-            ti.absoluteTolerance = float(settings.option("atol", rtol * 1e-3 * plate.delta_m))
+            ti.absoluteTolerance = float(settings.option("atol") or rtol * 1e-3 * plate.delta_m)
             ti.minimumStepSize = settings.dt * 1e-3
             ti.initialStepSize = settings.dt * 1e-2
         else:
@@ -358,7 +426,7 @@ class ExudynAdapter(EngineAdapter):
             n_data = mbs.AddNode(eii.NodeGenericData(initialCoordinates=[-1e-12, 0.0, 0.0, 0.0], numberOfDataCoordinates=4))
             mbs.AddObject(eii.ObjectContactSphereSphere(
                 markerNumbers=[m_target, m_ball], nodeNumber=n_data, spheresRadii=[target_radius, ball_radius],
-                contactStiffness=stiffness, contactDamping=0.0, contactStiffnessExponent=exponent, impactModel=0,
+                contactStiffness=stiffness, contactDamping=float(settings.option("contact_damping", 0.0)), contactStiffnessExponent=exponent, impactModel=0,
                 dynamicFriction=0.0))
             return "ObjectContactSphereSphere"
         expo = float(exponent)
@@ -381,8 +449,36 @@ class ExudynAdapter(EngineAdapter):
             keep_alive.append(uf)
             kind = "symbolic"
         mbs.AddObject(eii.ObjectConnectorSpringDamper(markerNumbers=[m_target, m_ball], referenceLength=distance,
-                                                      stiffness=stiffness, damping=0.0, springForceUserFunction=uf))
+                                                      stiffness=stiffness, damping=float(settings.option("contact_damping", 0.0)),
+                                                      springForceUserFunction=uf))
         return f"ObjectConnectorSpringDamper ({kind} user function)"
+
+
+def _law_numbers(scene, settings: EngineSettings) -> tuple[float, float]:
+    """(contact stiffness, exponent) of the run: alpha and 1.5, or k0 and 1 with law=linear, unless the
+    options contact_stiffness / contact_exponent set them."""
+    if settings.option("law", "hertz") == "linear":
+        stiffness, exponent = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).k0, 1.0
+    else:
+        stiffness, exponent = scene.alpha, 1.5
+    return (float(settings.option("contact_stiffness") or stiffness),
+            float(settings.option("contact_exponent") or exponent))
+
+
+def modal_model_error(scene, structure) -> tuple[float, float, float]:
+    """Signed relative errors on t_m, f_m, delta_m of the body's own modes (no residual) against the
+    continuum: the reference solver on `structure`'s modes (engines.chain's method for modal bodies)."""
+    from impactval.engines.chain import MODEL_ERROR_REF_TOL, _continuum_metrics
+    from impactval.reference.beams import Modes
+    from impactval.reference.solve import solve_modes
+
+    mm = np.diag(structure.mass_reduced)
+    ball = scene.ball
+    run, _ = solve_modes(Modes(np.asarray(structure.omega, float), mm, np.asarray(structure.phi_contact, float), 0.0),
+                         ball.mass, scene.alpha, ball.velocity, MODEL_ERROR_REF_TOL)
+    m = run.metrics
+    t, f, d = _continuum_metrics(scene)
+    return m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0
 
 
 def _solver_time(mbs) -> float:

@@ -1,24 +1,25 @@
 """MuJoCo adapter: the ball and the target built as an MJCF model, stepped with `mj_step`.
 
+A stepping adapter (engines/base.py): `build` makes the model, `step` calls `mj_step`, `contact`,
+`energy`, `kinematics` read the state; the base owns the loop, the window, dt = "auto", the
+stability limit and the status.
+
 Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damping):
 
 - ball: a sphere of the scene's mass and radius on one slide joint along z, touching the target
   at t = 0 with velocity -v0;
 - rigid plate: the world (a plane geom at z = 0);
-- beam: a Hencky chain of N rigid segments of length l = L/N along x (neutral axis at z = 0, top
-  face at z = h/2). Each segment carries the mass m = rho*A*l and the rotary inertia
-  m*(l^2 + h^2)/12 of a real beam piece (option rotary_inertia = "section", the default) or
-  m*l^2/12 (rotary_inertia = "none": pure Euler-Bernoulli, like the reference). The section's
-  rotary inertia lowers the chain's highest frequency, so N = 81 runs at dt = 1e-6 with Euler
-  (without it Euler needs dt < ~0.6 us), at the price of a model difference (Rayleigh beam:
-  first three frequencies -0.02/-0.07/-0.15 % on the worked case; up to ~1.3 % in t_m on a long
-  contact, see docs/mujoco.md). Neighbouring segments are joined by hinges (axis y) of
-  stiffness EI/l; a clamped end is a hinge to the ground of stiffness 2EI/l
-  (the end curvature is lumped over half a segment). Supports: simply supported = a roller at
-  x = 0 (slide x + free hinge) and a `<connect>` pin at x = L (a pin at both ends locks the
-  chain); clamped-clamped = a roller with a 2EI/l hinge at x = 0 and, at x = L, a `<connect>`
-  pin plus a fixed tendon over all hinge angles (= the last segment's absolute rotation) of
-  stiffness 2EI/l; cantilever = a 2EI/l hinge to the ground at x = 0, free end.
+- beam: the Hencky chain of `engines.chain.hencky_chain` (N rigid segments along x, neutral axis at
+  z = 0, top face at z = h/2, hinges of EI/l, clamped ends 2EI/l, rotary inertia m l^2/12: option
+  rotary_inertia = "none", the default, the Euler-Bernoulli chain; "section" adds the section's
+  m h^2/12, a Rayleigh beam, which lowers the chain's highest frequency (a larger stable dt) at the
+  price of a model difference that grows with h/L). N is sized from the scene
+  (`engines.chain.segments_for`: the modes that matter within `chain_tol` in frequency and the
+  chain's own error on t_m, f_m, delta_m within `chain_tol`), reported as `model_error`.
+  Supports: simply supported = a roller at x = 0 (slide x + free hinge) and a `<connect>` pin at
+  x = L (a pin at both ends locks the chain); clamped-clamped = a roller with a 2EI/l hinge at x = 0
+  and, at x = L, a `<connect>` pin plus a fixed tendon over all hinge angles (= the last segment's
+  absolute rotation) of stiffness 2EI/l; cantilever = a 2EI/l hinge to the ground at x = 0, free end.
   The ball hits the segment that contains x = impact_at*L, at that point;
 - modal target (contact "hertz" only): one oscillator per mode, mass m_i/phi_i^2 on a slide
   joint with stiffness (m_i/phi_i^2)*omega_i^2; the contact point moves by the sum of their
@@ -32,33 +33,40 @@ Contact modes:
 - "native": one explicit contact pair (condim 1) set to a linear, undamped spring of the paper's
   k0 = 0.8*alpha*sqrt(delta_m) (rigid-plate delta_m): direct solref = (-k0/m_eff, 0) with
   m_eff = 1/efc_diagA of the contact row (exact diagonal, `diagexact`) and a flat solimp of
-  small impedance (d0 = dwidth = NATIVE_IMPEDANCE = 1e-4, see there why not MuJoCo's 0.9);
+  small impedance (d0 = dwidth = NATIVE_IMPEDANCE = 1e-4, see there why not MuJoCo's 0.9).
+  Options `solref` ("a,b": positive = MuJoCo's standard time constant and damping ratio, negative =
+  direct -stiffness, -damping per unit effective mass) and `solimp` (5 numbers) replace them (for
+  tuning); the result's contact law is then linear only for a direct undamped solref with a flat solimp;
 - "native-hertz": the same pair with solref and the solimp shape fitted (least squares on the
   static force law MuJoCo itself produces, on a plate with the scene's ball) to alpha*delta^1.5
   over 0..1.2 delta_m, impedance <= 1e-3; the fit's RMS error is reported in diagnostics["native_hertz_fit_rms"].
 
-Series are sampled after every step at the new state (an extra `mj_forward`, not counted in the
-stepping wall time). Diagnostics of a beam: the chain's own first natural frequencies
-(`structure_frequencies`, from MuJoCo's linearised transition matrix, so supports and soft
-constraints are as simulated) next to the continuum's (`continuum_frequencies`). Energy for
-Euler/implicitfast uses the mean of the half-step velocities around a sample (second order).
-The support constraints use solref = (2 dt, 1) (MuJoCo's default 0.02 s makes them springs).
+Stability: Euler and implicitfast treat the hinge springs and the contact explicitly (semi-implicit
+Euler, stable while omega_max dt < 2), RK4 while omega_max dt < 2.83; omega_max is that of chain + ball
++ contact spring at its tangent stiffness at the rigid-plate f_m (`engines.chain.omega_max`).
+After `mj_step` the positions-derived data describe the state at the start of the step, so the adapter
+samples that state (`sample_lag = 1`, no extra `mj_forward`); energy for Euler/implicitfast uses the mean
+of the velocities before and after the step (second order). The support constraints use
+solref = (2 dt, 1) (MuJoCo's default 0.02 s makes them springs).
 """
 from __future__ import annotations
 
 import math
-import time
+from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
-from impactval.engines.base import EngineAdapter, EngineDiverged, EngineSettings, Simulation
+from impactval.engines.base import EngineDiverged, EngineSettings, Plan, SteppingAdapter
+from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
+from impactval.engines.options import in_range, numbers, one_of, option, positive
 from impactval.errors import EngineError
 
-#: default Hencky chain segment count (see `default_segments`)
-DEFAULT_SEGMENTS = 81
 #: MuJoCo integrators offered (first = default); "discrete" damps contacts and is left out
 INTEGRATORS = ("Euler", "implicitfast", "RK4")
+#: explicit stability limit dt_limit = STABILITY[integrator] / omega_max (imaginary-axis bound of the scheme)
+STABILITY = {"Euler": 2.0, "implicitfast": 2.0, "RK4": 2.0 * math.sqrt(2.0)}
 #: impedance of the native contact pair. MuJoCo's soft contact gives f = (d/A)*(k*delta - a0): the
 #: a0 term (the target's own acceleration at the contact) turns a contact on a flexible target into
 #: a stiff constraint for the usual d ~ 0.9-0.95 (worked-case beam: f up to 12x k0*delta); a small
@@ -66,32 +74,47 @@ INTEGRATORS = ("Euler", "implicitfast", "RK4")
 NATIVE_IMPEDANCE = 1e-4
 #: largest impedance of the fitted native-hertz shape (same reason)
 NATIVE_HERTZ_DMAX = 1e-3
-#: simulated time limit as a multiple of the rigid-plate contact time (plus the tail)
-MAX_TIME_FACTOR = 200.0
+#: most chain segments the sizing may choose (cost per step ~ N, steps ~ N^2 at the auto dt)
+MAX_SEGMENTS = 400
 #: how many chain frequencies to report
 N_FREQUENCIES = 6
-#: engine-specific options (settings.options): name -> (allowed values or a type, meaning)
-OPTIONS = {
-    "max_time": (float, "simulated time limit [s] (default: 200 rigid-plate contact times + tail)"),
-    "equality_timeconst": (float, "solref time constant [s] of the support constraints (default 2*dt)"),
-    "native_impedance": (float, f"constant solimp impedance d of the native linear contact "
-                         f"(default {NATIVE_IMPEDANCE:g}; MuJoCo's usual 0.9-0.95 stiffens it on flexible targets)"),
-    "rotary_inertia": (("section", "none"), "segment rotary inertia: 'section' = m(l^2+h^2)/12 (a real "
-                       "beam's, default), 'none' = m l^2/12 (pure Euler-Bernoulli; needs dt < ~0.5 us at N = 81)"),
-}
 
 
-def default_segments(scene) -> int:
-    """Hencky chain segment count when settings.segments is None.
-
-    81 segments: on the worked case (simply supported, mid-span) the chain's impact errors are
-    at most 1.0 % and its first three frequencies within 0.2 % of the continuum, and Euler is
-    stable at dt = 1e-6 (with the default section rotary inertia).
-    One function so a mode-based criterion can replace it.
-    """
-    return DEFAULT_SEGMENTS
+def _positive_below_one(value: Any) -> float:
+    v = positive(value)
+    if not v < 1.0:
+        raise ValueError(f"must be a number in (0, 1), got {value!r}")
+    return v
 
 
+@dataclass(frozen=True)
+class MujocoOptions:
+    """`--option mujoco.KEY=VALUE`."""
+
+    rotary_inertia: str = option("none", "segment rotary inertia: 'none' = m l^2/12 (Euler-Bernoulli chain, default), "
+                                 "'section' = m (l^2 + h^2)/12 (Rayleigh beam)", one_of("none", "section"))
+    chain_tol: float = option(DEFAULT_CHAIN_TOL, f"relative tolerance the chain is sized for (default "
+                              f"{DEFAULT_CHAIN_TOL:g})", in_range(1e-4, 0.2))
+    equality_timeconst: float | None = option(None, "solref time constant [s] of the support constraints (default 2*dt)",
+                                              positive)
+    native_impedance: float = option(NATIVE_IMPEDANCE, f"constant solimp impedance d of the native linear contact "
+                                     f"(default {NATIVE_IMPEDANCE:g})", _positive_below_one)
+    solref: tuple[float, float] | None = option(None, "contact pair solref 'a,b' (positive: timeconst [s], dampratio; "
+                                                "negative: -stiffness, -damping per unit effective mass)", numbers(2))
+    solimp: tuple[float, ...] | None = option(None, "contact pair solimp 'd0,dwidth,width,midpoint,power'", numbers(5))
+
+
+def default_segments(scene, settings: EngineSettings | None = None) -> int:
+    """Chain segments for `scene` when settings.segments is None: `engines.chain.segments_for` at the
+    option chain_tol, with the impact point centred on a segment."""
+    tol = settings.option("chain_tol", DEFAULT_CHAIN_TOL) if settings is not None else DEFAULT_CHAIN_TOL
+    rotary = settings.option("rotary_inertia", "none") if settings is not None else "none"
+    return _sized(scene, float(tol), rotary).n
+
+
+@lru_cache(maxsize=16)
+def _sized(scene, tol: float, rotary: str):
+    return segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS))
 def _fmt(x: float) -> str:
     return f"{x:.17g}"
 
@@ -115,18 +138,17 @@ class _Layout:
         self.n_modes = 0
 
 
-def _beam_xml(beam, n: int, lay: _Layout, contact_geom: bool, rotary: str = "section") -> tuple[str, str]:
-    """Worldbody chain and extra sections (equality, tendon) for a Hencky chain beam."""
-    mat = beam.material
-    length, w, h = beam.length, beam.width, beam.height
-    l = length / n
-    ei = mat.young * beam.second_moment
-    k_hinge, k_clamp = ei / l, 2.0 * ei / l
-    m_seg = mat.density * beam.area * l
-    iyy = m_seg * (l * l + (h * h if rotary == "section" else 0.0)) / 12.0
+
+def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool) -> tuple[str, str]:
+    """Worldbody chain and extra sections (equality, tendon) for the Hencky chain of a beam."""
+    n, l = chain.n, chain.segment_length
+    w, h = beam.width, beam.height
+    k_hinge, k_clamp = chain.hinge_stiffness, chain.clamp_stiffness
+    m_seg = chain.segment_mass
+    iyy = chain.rotary_inertia
     ixx = izz = m_seg * (l * l + w * w + h * h) / 12.0     # out of plane: never excited
     x_c = beam.impact_x
-    hit = min(int(x_c / l), n - 1)
+    hit = chain.hit_segment
     lay.kind, lay.n_segments, lay.segment_length = "beam", n, l
     lay.hinge_stiffness, lay.clamp_stiffness, lay.hit_segment = k_hinge, k_clamp, hit
     lay.top, lay.impact_x = h / 2.0, x_c
@@ -144,21 +166,21 @@ def _beam_xml(beam, n: int, lay: _Layout, contact_geom: bool, rotary: str = "sec
             s.append(f'<joint name="h{i}" type="hinge" axis="0 1 0" stiffness="{_fmt(k_hinge)}"/>')
         s.append(f'<inertial pos="{_vec(l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy, izz)}"/>')
         if i == hit:
-            off = x_c - i * l
+            off = chain.hit_offset
             s.append(f'<site name="hit" pos="{_vec(off, 0, h / 2)}" size="0.001"/>')
             if contact_geom:
                 s.append(f'<geom name="target" type="box" pos="{_vec(off, 0, 0)}" '
                          f'size="{_vec(l / 2, w / 2, h / 2)}" contype="0" conaffinity="0" mass="0"/>')
         parts.append("".join(s))
         closes.append("</body>")
-    chain = "".join(parts) + "".join(closes)
+    chain_xml = "".join(parts) + "".join(closes)
     extra = ""
     if support in ("simply-supported", "clamped-clamped"):
         extra += f'<equality><connect name="pin" body1="seg{n - 1}" anchor="{_vec(l, 0, 0)}"/></equality>'
     if support == "clamped-clamped":
         joints = "".join(f'<joint joint="h{i}" coef="1"/>' for i in range(n))
         extra += f'<tendon><fixed name="clamp_end" stiffness="{_fmt(k_clamp)}" springlength="0">{joints}</fixed></tendon>'
-    return chain, extra
+    return chain_xml, extra
 
 
 def _modal_xml(target, lay: _Layout) -> str:
@@ -175,7 +197,7 @@ def _modal_xml(target, lay: _Layout) -> str:
     return "".join(parts)
 
 
-def build_xml(scene, settings: EngineSettings, n_segments: int | None = None,
+def build_xml(scene, settings: EngineSettings, chain: HenckyChain | None = None,
               solref: tuple[float, float] = (-1.0, 0.0),
               solimp=(NATIVE_IMPEDANCE, NATIVE_IMPEDANCE, 0.001, 0.5, 2.0)) -> tuple[str, _Layout]:
     """MJCF text of the scene and its layout. `solref`/`solimp` are those of the contact pair
@@ -190,8 +212,9 @@ def build_xml(scene, settings: EngineSettings, n_segments: int | None = None,
         world = ('<geom name="target" type="plane" size="1 1 0.1" contype="0" conaffinity="0"/>'
                  '<site name="hit" pos="0 0 0" size="0.001"/>')
     elif target.kind == "beam":
-        world, extra = _beam_xml(target, n_segments or default_segments(scene), lay, native,
-                                 settings.option("rotary_inertia", "section"))
+        if chain is None:
+            chain = hencky_chain(target, default_segments(scene, settings), settings.option("rotary_inertia", "none"))
+        world, extra = _beam_xml(target, chain, lay, native)
     else:
         world = _modal_xml(target, lay)
     z_ball = lay.top + ball.radius
@@ -273,213 +296,225 @@ class _Probe:
         return cb
 
 
-def _check_options(settings: EngineSettings) -> None:
-    for key, value in settings.options:
-        if key not in OPTIONS:
-            raise EngineError(f"mujoco: unknown option {key!r}; known: {', '.join(OPTIONS)}.")
-        allowed = OPTIONS[key][0]
-        if allowed is float:
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
-                raise EngineError(f"mujoco: option {key} must be a positive number, got {value!r}.")
-        elif value not in allowed:
-            raise EngineError(f"mujoco: option {key} must be one of {', '.join(allowed)}, got {value!r}.")
+
+class _Run:
+    """A live MuJoCo job: model, data, probe and what the samples need."""
+
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
 
 
-class MujocoAdapter(EngineAdapter):
+class MujocoAdapter(SteppingAdapter):
     """MuJoCo (`pip install 'impactval[mujoco]'`); see the module docstring for the model."""
 
     name = "mujoco"
     module = "mujoco"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    Options = MujocoOptions
+    sample_lag = 1          # after mj_step, positions-derived data describe the step's start (see step)
 
-    def check_settings(self, settings: EngineSettings) -> None:
-        super().check_settings(settings)
-        _check_options(settings)
+    def check_settings(self, settings: EngineSettings) -> EngineSettings:
+        settings = super().check_settings(settings)
+        if settings.segments is not None and settings.segments < 2:
+            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
+        return settings
+
+    # ------------------------------------------------------------------ planning
+    def chain(self, scene, settings: EngineSettings) -> HenckyChain | None:
+        """The Hencky chain this job builds (None for a plate or modal target)."""
+        if scene.target.kind != "beam":
+            return None
+        n = settings.segments or default_segments(scene, settings)
+        return hencky_chain(scene.target, n, settings.option("rotary_inertia", "none"))
+
+    def contact_law(self, scene, settings: EngineSettings):
+
+        if settings.contact == "native" and (settings.option("solref") or settings.option("solimp")):
+            return None          # a user-tuned pair: its law is known only after building (see build)
+        return super().contact_law(scene, settings)
+
+    def plan(self, scene, settings: EngineSettings) -> Plan:
+        from impactval.engines.chain import model_error
+        from impactval.reference.hertz import ContactLaw
+
+        chain = self.chain(scene, settings)
+        law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
+        if settings.contact == "native-hertz":
+            law = ContactLaw.hertz(scene.alpha)
+        om, what = omega_max(scene, law, chain)
+        integ = settings.integrator or INTEGRATORS[0]
+        diag: dict = {}
+        err = math.nan
+        if chain is not None:
+            me = model_error(scene, chain)
+            err = me.largest
+            diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m,
+                        rotary_inertia=chain.rotary)
+        elif scene.target.kind == "rigid-plate":
+            err = 0.0
+        return Plan(STABILITY[integ] / om, f"{integ}, {what}", err, diag)
 
     # ------------------------------------------------------------------ model
-    def build(self, scene, settings: EngineSettings):
-        """(model, data, layout, probe, contact info) of the scene, ready to step."""
+    def build(self, scene, settings: EngineSettings) -> _Run:
+        """The scene as a MuJoCo model at first touch, ready to step."""
         import mujoco
+
+        from impactval.reference.hertz import plate_impact
 
         if scene.target.kind == "modal" and settings.contact != "hertz":
             raise EngineError(f"mujoco: a modal target has no surface to collide with; use contact 'hertz' "
                               f"(got {settings.contact!r}).")
-        n = None
-        if scene.target.kind == "beam":
-            n = settings.segments or default_segments(scene)
-            if n < 2:
-                raise EngineError(f"segments must be at least 2 for a Hencky chain, got {n}.")
         info: dict = {}
-        xml, lay = build_xml(scene, settings, n)
+        chain = self.chain(scene, settings)
+        xml, lay = build_xml(scene, settings, chain)
         model = mujoco.MjModel.from_xml_string(xml)
         if lay.kind == "beam":
             # MuJoCo's default equality solref (0.02 s) makes the supports springs of ~20 rad/s
             # (first frequency -96 %); 2*dt is the stiffest time constant refsafe allows
-            tc = settings.option("equality_timeconst", 2.0 * settings.dt)
+            tc = settings.option("equality_timeconst") or 2.0 * settings.dt
             model.eq_solref[:, 0] = tc
             model.eq_solref[:, 1] = 1.0
             info["equality_solref"] = (float(tc), 1.0)
+        plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+        alpha = scene.alpha
+        potential = (lambda dl: 0.4 * alpha * dl**2.5)
         if settings.contact != "hertz":
-            from impactval.reference.hertz import plate_impact
-
-            plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
             a_inv_mass = _contact_diag_a(mujoco, model, scene)
             info["contact_inverse_mass"] = a_inv_mass
             if settings.contact == "native":
-                k0 = plate.k0
-                model.pair_solref[0] = (-k0 * a_inv_mass, 0.0)
                 imp = float(settings.option("native_impedance", NATIVE_IMPEDANCE))
-                if not imp < 1.0:
-                    raise EngineError(f"mujoco: option native_impedance must be below 1, got {imp!r}.")
-                model.pair_solimp[0] = (imp, imp, 0.001, 0.5, 2.0)
-                info["native_impedance"] = imp
-                info["contact_stiffness"] = k0
-                info["contact_law"] = "linear k0 = 0.8*alpha*sqrt(delta_m)"
+                solref = settings.option("solref") or (-plate.k0 * a_inv_mass, 0.0)
+                solimp = settings.option("solimp") or (imp, imp, 0.001, 0.5, 2.0)
+                model.pair_solref[0] = solref
+                model.pair_solimp[0] = solimp
+                info.update(native_solref=tuple(solref), native_solimp=tuple(solimp))
+                k_lin = _linear_stiffness(solref, solimp, a_inv_mass)
+                if k_lin is not None:
+                    info["contact_stiffness"] = k_lin
+                    potential = (lambda dl: 0.5 * k_lin * dl * dl)
+                else:
+                    potential = _tabulated_potential(mujoco, model, scene, plate)
             else:
                 k_scale, solimp, rms = fit_native_hertz(scene)
                 solref = (-k_scale * a_inv_mass, 0.0)
                 model.pair_solref[0] = solref
                 model.pair_solimp[0] = solimp
                 info.update(native_hertz_solref=tuple(solref), native_hertz_solimp=tuple(solimp),
-                            native_hertz_fit_rms=rms,
-                            contact_law="fitted solimp shape toward alpha*delta^1.5")
+                            native_hertz_fit_rms=rms, contact_law="fitted solimp shape toward alpha*delta^1.5")
+                potential = _tabulated_potential(mujoco, model, scene, plate)
         data = mujoco.MjData(model)
         probe = _Probe(mujoco, model, lay, scene, settings.contact)
         data.qvel[probe.ball_dof] = -scene.ball.velocity
-        return model, data, lay, probe, info
+        integ = settings.integrator or INTEGRATORS[0]
+        run = _Run(mj=mujoco, model=model, data=data, lay=lay, probe=probe, contact_mode=settings.contact,
+                   alpha=alpha, potential=potential, sync=integ in ("Euler", "implicitfast"),
+                   v_prev=np.zeros(model.nv), v_mean=np.zeros(model.nv), mv=np.zeros(model.nv), n_steps=0,
+                   dt=settings.dt,
+                   x_ball0=float(data.qpos[probe.ball_qpos]), diagnostics=info, integrator=integ, chain=chain,
+                   warnings=[], old_cb=mujoco.get_mjcb_passive(), old_warn=mujoco.get_mju_user_warning())
+        # MuJoCo would print warnings and append them to ./MUJOCO_LOG.TXT; they become the status instead
+        mujoco.set_mju_user_warning(run.warnings.append)
+        if settings.contact == "hertz":
+            mujoco.set_mjcb_passive(probe.hertz_callback())
+        mujoco.mj_forward(model, data)
+        run.z_tip0 = float(data.site_xpos[probe.tip, 2])
+        delta, xs = probe.delta_points(data)
+        f0 = alpha * delta**1.5 if (settings.contact == "hertz" and delta > 0) else 0.0
+        e0 = float(data.energy[0]) + float(data.energy[1]) + (potential(delta) if delta > 0 else 0.0)
+        run.sample = (delta, f0, 0.0, xs, scene.ball.velocity, e0)
+        if chain is not None:
+            info["segments"] = chain.n
+        return run
+
+    def close(self, run: _Run) -> None:
+        run.mj.set_mjcb_passive(run.old_cb)
+        run.mj.set_mju_user_warning(run.old_warn)
+        if run.lay.kind == "beam":
+            run.diagnostics["equality_violation_max"] = _equality_violation(run.data)
+        if run.warnings:
+            run.diagnostics["mujoco_warnings"] = run.warnings[:5]
 
     # ------------------------------------------------------------------ stepping
-    def _simulate(self, scene, settings: EngineSettings) -> Simulation:
-        import mujoco
-
-        from impactval.reference.hertz import plate_impact
-
-        t0 = time.perf_counter()
-        model, d, lay, probe, info = self.build(scene, settings)
-        diagnostics: dict = dict(info)
-        if lay.kind == "beam":
-            diagnostics.update(self.structure_frequencies(scene, settings, model))
-            diagnostics["segments"] = lay.n_segments
-            diagnostics["rotary_inertia"] = settings.option("rotary_inertia", "section")
-        build_s = time.perf_counter() - t0
-
-        plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
-        t_max = MAX_TIME_FACTOR * plate.t_m + settings.tail
-        t_max = float(settings.option("max_time", t_max))
-        n_max = int(math.ceil(t_max / settings.dt)) + 1
-        alpha = scene.alpha
-        contact = settings.contact
-        if contact == "native":
-            k_lin = info["contact_stiffness"]
-            potential = (lambda dl: 0.5 * k_lin * dl * dl)
-        elif contact == "native-hertz":
-            potential = _tabulated_potential(mujoco, model, scene, plate)
+    def step(self, run: _Run) -> None:
+        """One mj_step. mj_step computes the forward dynamics of the state at its start, then integrates:
+        after it, positions-derived data (site_xpos, energy, contact forces, qM) describe the state at the
+        start of the step, so the adapter samples that state (sample_lag = 1) and needs no extra mj_forward."""
+        mj, m, d = run.mj, run.model, run.data
+        run.v_prev[:] = d.qvel
+        mj.mj_step(m, d)
+        run.n_steps += 1
+        if d.warning[mj.mjtWarning.mjWARN_BADQACC].number > 0:
+            raise EngineDiverged(f"MuJoCo reported NaN/huge accelerations after {run.n_steps} steps "
+                                 f"(t = {run.n_steps * run.dt:.3g} s, dt = {run.dt:g} s): "
+                                 f"{run.warnings[0].strip() if run.warnings else ''}")
+        if not run.sync:
+            # RK4 evaluates intermediate stages inside mj_step: the data describe no single state, so
+            # recompute the new state and sample it (sample_lag = 0 for RK4)
+            mj.mj_forward(m, d)
+            run.v_prev[:] = d.qvel
+        delta, xs = run.probe.delta_points(d)
+        pe = float(d.energy[0]) + (run.potential(delta) if delta > 0 else 0.0)
+        if run.sync:
+            # Euler and implicitfast update the velocity first and move with it: qvel is a half-step
+            # velocity and 1/2 v'Mv with it swings by O(omega dt). The sampled state (the step's start) gets
+            # the mean of the velocities before and after the step (second order), with its mass matrix.
+            run.v_mean[:] = run.v_prev
+            run.v_mean += d.qvel
+            run.v_mean *= 0.5
+            mj.mj_mulM(m, d, run.mv, run.v_mean)
+            ke = 0.5 * float(run.v_mean @ run.mv)
         else:
-            potential = (lambda dl: 0.4 * alpha * dl**2.5)
+            ke = float(d.energy[1])             # RK4: the new state's own kinetic energy
+        if run.contact_mode == "hertz":
+            f = run.alpha * delta**1.5 if delta > 0 else 0.0
+        else:
+            f = run.probe.native_force(d)
+        z_tip = float(d.site_xpos[run.probe.tip, 2])
+        run.sample = (delta, f, run.z_tip0 - z_tip, xs, -float(run.v_prev[run.probe.ball_dof]), pe + ke)
 
-        cols = {k: [] for k in ("t", "delta", "f", "xb", "xs", "v", "pe", "ke", "ke_sync")}
-        # Euler and implicitfast update the velocity first and move with it: the stored qvel is a
-        # half-step velocity, and 1/2 v'Mv with it swings by O(omega*dt) (2.5 % on the plate at
-        # 1 us) though nothing is lost. Kinetic energy at a sample is taken with the mean of the
-        # velocities before and after it (second order, as for leapfrog); RK4 uses its own qvel.
-        sync = (settings.integrator or INTEGRATORS[0]) in ("Euler", "implicitfast")
-        v_mean, mv = np.zeros(model.nv), np.zeros(model.nv)
-        x_ball0 = d.qpos[probe.ball_qpos]
-        bad = mujoco.mjtWarning.mjWARN_BADQACC
+    def contact(self, run: _Run) -> tuple[float, float]:
+        return run.sample[0], run.sample[1]
 
-        def record() -> tuple[float, float]:
-            delta, xs = probe.delta_points(d)
-            if contact == "hertz":
-                f = alpha * delta**1.5 if delta > 0 else 0.0
-            else:
-                f = probe.native_force(d)
-            pot = potential(delta) if delta > 0 else 0.0
-            cols["t"].append(d.time)
-            cols["delta"].append(delta)
-            cols["f"].append(f)
-            cols["xb"].append(x_ball0 - d.qpos[probe.ball_qpos])
-            cols["xs"].append(xs)
-            cols["v"].append(-d.qvel[probe.ball_dof])
-            cols["pe"].append(d.energy[0] + pot)
-            cols["ke"].append(d.energy[1])
-            return delta, f
+    def energy(self, run: _Run) -> float:
+        return run.sample[5]
 
-        old_cb, old_warn = mujoco.get_mjcb_passive(), mujoco.get_mju_user_warning()
-        warnings: list[str] = []
-        # MuJoCo would print warnings and append them to ./MUJOCO_LOG.TXT; they become the status instead
-        mujoco.set_mju_user_warning(warnings.append)
-        if contact == "hertz":
-            mujoco.set_mjcb_passive(probe.hertz_callback())
-        step_s = 0.0
-        n_steps = 0
-        try:
-            mujoco.mj_forward(model, d)
-            record()
-            touched, t_end = False, math.inf
-            for _ in range(n_max):
-                v_mean[:] = d.qvel
-                ts = time.perf_counter()
-                mujoco.mj_step(model, d)
-                step_s += time.perf_counter() - ts
-                if sync:                  # d.qM is still the mass matrix of the sample before the step
-                    v_mean += d.qvel
-                    v_mean *= 0.5
-                    mujoco.mj_mulM(model, d, mv, v_mean)
-                    cols["ke_sync"].append(0.5 * float(v_mean @ mv))
-                n_steps += 1
-                if d.warning[bad].number > 0:
-                    raise EngineDiverged(f"MuJoCo reported NaN/huge accelerations after {n_steps} steps "
-                                         f"(t = {n_steps * settings.dt:.3g} s, dt = {settings.dt:g} s): "
-                                         f"{warnings[0].strip() if warnings else ''}")
-                mujoco.mj_forward(model, d)
-                delta, f = record()
-                if not math.isfinite(delta) or abs(delta) > 10 * scene.ball.radius:
-                    break          # the base class classifies NaN/blow-up from the series
-                if f > 0:
-                    touched = True
-                elif touched and delta < 0 and t_end == math.inf:
-                    t_end = d.time
-                if d.time >= t_end + settings.tail:
-                    break
-        finally:
-            mujoco.set_mjcb_passive(old_cb)
-            mujoco.set_mju_user_warning(old_warn)
-        if warnings:
-            diagnostics["mujoco_warnings"] = warnings[:5]
-        ke = np.asarray(cols["ke"])
-        if sync:
-            ke[:len(cols["ke_sync"])] = cols["ke_sync"]
-        energy = np.asarray(cols["pe"]) + ke
-        if lay.kind == "beam":
-            diagnostics["equality_violation_max"] = _equality_violation(d)
-        model_name = {"plate": "rigid-plate", "modal": f"modal-{lay.n_modes}"}.get(
-            lay.kind, f"hencky-chain-{lay.n_segments}")
-        return Simulation(t=np.asarray(cols["t"]), delta=np.asarray(cols["delta"]), f=np.asarray(cols["f"]),
-                          x_ball=np.asarray(cols["xb"]), x_structure=np.asarray(cols["xs"]),
-                          v_ball=np.asarray(cols["v"]), energy=energy, build_s=build_s,
-                          step_s=step_s, n_steps=n_steps, model=f"mujoco-{model_name}-{contact}",
-                          diagnostics=diagnostics,
-                          settings={"integrator": settings.integrator or INTEGRATORS[0],
-                                    "segments": lay.n_segments or None})
+    def kinematics(self, run: _Run) -> tuple[float, float, float]:
+        return run.sample[2], run.sample[3], run.sample[4]
 
-    # ------------------------------------------------------------------ diagnostics
-    def structure_frequencies(self, scene, settings: EngineSettings, model=None) -> dict:
-        """The chain's first natural frequencies [rad/s] from MuJoCo's linearised transition
-        (no contact, undeformed chain) and the continuum's (Euler-Bernoulli)."""
-        import mujoco
+    def frequencies(self, run: _Run) -> np.ndarray:
+        if run.lay.kind != "beam":
+            return np.zeros(0)
+        return chain_frequencies(run.mj, run.model)[:N_FREQUENCIES]
 
-        from impactval.reference.beams import beam_frequencies
+    def describe(self, run: _Run) -> str:
+        name = {"plate": "rigid-plate", "modal": f"modal-{run.lay.n_modes}"}.get(
+            run.lay.kind, f"hencky-chain-{run.lay.n_segments}")
+        return f"mujoco-{name}-{run.contact_mode}"
 
-        beam = scene.target
-        if model is None:
-            model, *_ = self.build(scene, settings)
-        mat = beam.material
-        cont = beam_frequencies(beam.support, N_FREQUENCIES, beam.length, mat.young, beam.second_moment,
-                                mat.density, beam.area)
-        freqs = chain_frequencies(mujoco, model)
-        return {"structure_frequencies": [float(x) for x in freqs[:N_FREQUENCIES]],
-                "continuum_frequencies": [float(x) for x in cont]}
+    def simulate(self, scene, settings: EngineSettings):
+        self.sample_lag = 0 if (settings.integrator or INTEGRATORS[0]) == "RK4" else 1
+        sim = super().simulate(scene, settings)
+        k_lin = sim.diagnostics.get("contact_stiffness")
+        if settings.contact == "native" and k_lin:
+            from impactval.reference.hertz import ContactLaw
+
+            sim.contact_law = ContactLaw.linear(k_lin)
+        sim.settings = {"integrator": settings.integrator or INTEGRATORS[0],
+                        "segments": sim.diagnostics.get("segments")}
+        if scene.target.kind == "beam":
+            from impactval.engines.chain import continuum_frequencies
+
+            sim.diagnostics["continuum_frequencies"] = [float(x) for x in
+                                                        continuum_frequencies(scene.target, N_FREQUENCIES)]
+        return sim
+
+
+def _linear_stiffness(solref, solimp, a_inv_mass: float) -> float | None:
+    """Linear stiffness [N/m] of a direct, undamped solref with a flat, small solimp (else None)."""
+    if solref[0] < 0 and solref[1] == 0 and solimp[0] == solimp[1] and solimp[0] <= 1e-3:
+        return -solref[0] / a_inv_mass
+    return None
 
 
 def chain_frequencies(mujoco, model) -> np.ndarray:
@@ -561,7 +596,7 @@ def fit_native_hertz(scene) -> tuple[float, tuple[float, ...], float]:
     from impactval.scenarios.scene import RigidPlate, Scene
 
     plate_scene = Scene(scene.name + "-fit", scene.ball, RigidPlate(scene.target.material))
-    xml, _ = build_xml(plate_scene, EngineSettings(contact="native"))
+    xml, _ = build_xml(plate_scene, EngineSettings(dt=1e-6, contact="native"))
     model = mujoco.MjModel.from_xml_string(xml)
     plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
     a_inv_mass = _contact_diag_a(mujoco, model, plate_scene)

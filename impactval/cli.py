@@ -265,8 +265,10 @@ def _parse_options(items: tuple[str, ...]) -> tuple[tuple[str, object], ...]:
     return tuple(out)
 
 
-def _parse_dts(text: str) -> list[float]:
-    """--dt: one time step or a comma-separated list [s]."""
+def _parse_dts(text: str) -> list:
+    """--dt: "auto" (each engine picks), one time step or a comma-separated list [s]."""
+    if str(text).strip().lower() == "auto":
+        return ["auto"]
     try:
         dts = [float(x) for x in str(text).split(",") if x.strip()]
     except ValueError:
@@ -287,8 +289,9 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.argument("scene", nargs=-1)
 @click.option("--engines", "engines", default="mujoco", show_default=True,
               help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
-@click.option("--dt", default="1e-6", show_default=True,
-              help="Engine time step [s]; several, comma-separated (1e-6,5e-7,2e-7), sweep speed against accuracy.")
+@click.option("--dt", default="auto", show_default=True,
+              help="Engine time step [s], or auto (each engine picks a step under its predicted stability limit); "
+                   "several, comma-separated (1e-6,5e-7,2e-7), sweep speed against accuracy.")
 @click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]),
               help="hertz: exact law injected; native: engine contact as the linear spring k0; "
                    "native-hertz: engine contact shaped toward Hertz.")

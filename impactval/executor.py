@@ -34,6 +34,7 @@ from typing import Any
 
 from impactval.errors import EngineError
 from impactval.reference.result import ImpactResult, Status
+from impactval.engines.base import _dt_text
 
 _HEADER = struct.Struct("!Q")
 
@@ -145,7 +146,7 @@ class EngineWorker:
         if self.proc.poll() is None and elapsed >= settings.timeout_s:
             self.kill()
             return ImpactResult.failed(scene.name, name, Status.TIMEOUT,
-                                       f"no result after {settings.timeout_s:g} s (dt = {settings.dt:g} s)",
+                                       f"no result after {settings.timeout_s:g} s (dt = {_dt_text(settings.dt)})",
                                        settings=settings.as_dict())
         try:
             code = self.proc.wait(5)

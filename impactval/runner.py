@@ -63,10 +63,16 @@ class _Stop(BaseException):
 
 
 def resolve_engine(spec: str) -> str:
-    """Check an engine name ("mujoco") or import path ("pkg.module:Class"); return it unchanged."""
+    """Check an engine name ("mujoco"), entry point (group impactval.engines) or import path
+    ("pkg.module:Class", which must name an EngineAdapter subclass); return it unchanged."""
     if not isinstance(spec, str) or not spec.strip():
         raise EngineError(f"engine names must be non-empty strings, got {spec!r}.")
-    if spec in ENGINES or (":" in spec and all(spec.split(":", 1))):
+    if spec in ENGINES:
+        return spec
+    from impactval.engines.base import _entry_points, adapter_class
+
+    if ":" in spec or spec in _entry_points():
+        adapter_class(spec)          # EngineError (exit 2) when it is not an adapter class
         return spec
     installed = [n for n, m in ENGINE_MODULES.items() if importlib.util.find_spec(m)]
     raise EngineError(f"unknown engine {spec!r}; known: {', '.join(ENGINES)} (installed: "
@@ -209,17 +215,11 @@ def _as_scene(s):
 
 
 def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
-    """The settings one engine gets: options named "ENGINE.key" go to that engine only (as "key"),
-    plain "key" options to every engine."""
-    name = spec.split(":")[-1].lower() if ":" in spec else spec
-    opts = []
-    for key, value in settings.options:
-        head, dot, rest = key.partition(".")
-        if not dot:
-            opts.append((key, value))
-        elif head.lower() in (name, spec):
-            opts.append((rest, value))
-    return replace(settings, options=tuple(opts))
+    """The settings one engine gets (engines.options.options_for): "ENGINE.key" options go to that
+    engine only (as "key"), plain "key" options to every engine."""
+    from impactval.engines.options import options_for
+
+    return options_for(settings, spec)
 
 
 # ---------------------------------------------------------------------------- execution
@@ -503,6 +503,9 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
                                   timeout_s=timeout_s).items() if v is not None}
     variants = [replace(base, dt=step, **over) for step in dts]
     settings = variants[0]
+    from impactval.engines.options import check_prefixes
+
+    check_prefixes(settings.options, specs)       # "bullet.x": no such engine in this run -> exit 2
     _check_settings_somewhere(specs, settings)
     if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
         raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {threshold!r}.")
@@ -603,7 +606,8 @@ def table_rows(df: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
     cells = []
     for _, r in df.iterrows():
         seg = r["segments"]
-        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), f"{r['dt']:g}",
+        dt = f"{r['dt']:g}" if isinstance(r["dt"], (int, float)) else str(r["dt"])
+        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), dt,
                       "" if seg in ("", None) or (isinstance(seg, float) and math.isnan(seg)) else str(seg),
                       str(r["status"]), _pct(r["err_t_m"]), _pct(r["err_f_m"]), _pct(r["err_delta_m"]),
                       _pct_abs(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
@@ -628,7 +632,7 @@ def markdown_report(df: pd.DataFrame, settings: EngineSettings | None = None) ->
     out = ["# impactval run", ""]
     if settings is not None:
         steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
-                                                     reverse=True)) or f"{settings.dt:g}"
+                                                     reverse=True)) or f"{settings.dt}"
         out += [f"Settings: dt = {steps} s, contact = {settings.contact}, integrator = "
                 f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
                 f"timeout = {settings.timeout_s:g} s.", ""]

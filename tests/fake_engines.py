@@ -1,9 +1,11 @@
-"""Misbehaving adapters for the runner's isolation tests, loaded as "fake_engines:Class"."""
+"""Misbehaving adapters for the isolation and divergence tests, loaded as "fake_engines:Class"."""
+import math
 import os
 import signal
 import time
 
 from impactval.engines.base import EngineAdapter
+from impactval.engines.fake_ import HertzSpringAdapter
 
 
 class KillSelf(EngineAdapter):
@@ -12,7 +14,7 @@ class KillSelf(EngineAdapter):
     name = "killself"
     module = "os"
 
-    def _simulate(self, scene, settings):
+    def simulate(self, scene, settings):
         os.kill(os.getpid(), signal.SIGKILL)
         time.sleep(60)  # pragma: no cover
 
@@ -23,7 +25,7 @@ class Hang(EngineAdapter):
     name = "hang"
     module = "os"
 
-    def _simulate(self, scene, settings):
+    def simulate(self, scene, settings):
         time.sleep(3600)  # pragma: no cover
 
 
@@ -35,9 +37,9 @@ def _slow_mujoco():
 
         name = "slow-mujoco"
 
-        def _simulate(self, scene, settings):
+        def build(self, scene, settings):
             time.sleep(float(os.environ.get("IMPACTVAL_TEST_SLOW_S", "0.6")))
-            return super()._simulate(scene, settings)
+            return super().build(scene, settings)
 
     return SlowMujoco
 
@@ -46,3 +48,52 @@ def __getattr__(name):          # "fake_engines:SlowMujoco" without importing Mu
     if name == "SlowMujoco":
         return _slow_mujoco()
     raise AttributeError(name)
+class Raises(EngineAdapter):
+    """Raises an ordinary exception while simulating."""
+
+    name = "raises"
+    module = "os"
+
+    def simulate(self, scene, settings):
+        raise ZeroDivisionError("boom")
+
+
+class NanAfter(HertzSpringAdapter):
+    """Closed form until half the contact, then NaN."""
+
+    name = "nan-after"
+
+    def contact(self, model):
+        d, f = super().contact(model)
+        return (math.nan, math.nan) if model.t > 0.5 * model.t_contact else (d, f)
+
+
+class EnergyGrows(HertzSpringAdapter):
+    """Reports an energy that grows 20 % over the contact (a slow instability)."""
+
+    name = "energy-grows"
+
+    def energy(self, model):
+        return super().energy(model) * (1.0 + 0.2 * min(model.t / model.t_contact, 1.0))
+
+
+class ThroughTarget(HertzSpringAdapter):
+    """The ball keeps going: delta grows without bound and no force stops it."""
+
+    name = "through"
+
+    def contact(self, model):
+        d = model.v0 * model.t
+        return d, 0.0 if d > 1e-3 else 1.0
+
+
+class NeverLeaves(HertzSpringAdapter):
+    """Stays in contact forever (the window cap must end it)."""
+
+    name = "never-leaves"
+
+    def contact(self, model):
+        return 1e-6, 1.0
+
+    def energy(self, model):
+        return 1.0

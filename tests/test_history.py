@@ -57,7 +57,8 @@ def test_bad_baseline_files(tmp_path):
 @requires_mujoco
 def test_nightly_run_flags_a_regression_and_exits_1(tmp_path):
     """Run, then pretend the baseline was better: the second run is marked '+' and exits 1."""
-    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--tol", "1e-5"]
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--tol", "1e-5",
+           "--dt", "1e-6"]
     first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], capture_output=True, text=True)
     assert first.returncode == 0, first.stderr
     base = tmp_path / "a" / "results.csv"

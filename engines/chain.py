@@ -1,0 +1,278 @@
+"""The Hencky chain beam shared by the chain engines (MuJoCo, PyBullet), sized from the scene.
+
+A beam of length L becomes N rigid segments of length l = L/N joined by rotational springs: an
+internal hinge has the stiffness EI/l, a clamped end 2EI/l (the end curvature lumped over half a
+segment). Each segment has the mass rho*A*l and the rotary inertia about its centre
+m*l^2/12 (`rotary="none"`: a rigid bar, the Euler-Bernoulli chain) or m*(l^2 + h^2)/12
+(`rotary="section"`: plus the section's own rotary inertia, a Rayleigh beam). The ball hits the
+segment containing x = impact_at*L at that point.
+
+`HenckyChain.linear()` is the chain's small-deflection model in the node deflections w_0..w_N
+(supports remove w_0 and, pinned or clamped at x = L, w_N): mass and stiffness matrices, and the
+row that maps them to the contact point. From it: the chain's natural frequencies and mode data at
+the contact point (`modes()`), the highest frequency of chain + ball + contact spring (the explicit
+stability limit 2/omega_max), and `model_error`, the chain's own discretisation error on t_m, f_m,
+delta_m: the reference solver run on the chain's exact modes against the continuum's (so the
+estimate is the error of the chain as a model, with no time-step error of any engine in it).
+
+`segments_for(scene, tol)` sizes N: the modes that matter (`reference.modechoice.required_modes`)
+must have chain frequencies within `tol` of the continuum's (a Hencky chain's frequency error is
+~c (j/N)^2 for mode j, so N scales with the highest mode that matters), then N grows (as the
+1/N^2 law predicts) until `model_error` is within `tol` too.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+#: fewest segments of a chain
+MIN_SEGMENTS = 8
+#: the metric error the chain may have from its discretisation, as a fraction of the bar (1.5 %)
+DEFAULT_CHAIN_TOL = 5e-3
+#: reference tolerance used to measure the chain's model error (well below DEFAULT_CHAIN_TOL)
+MODEL_ERROR_REF_TOL = 1e-5
+
+
+@dataclass(frozen=True)
+class ChainLinear:
+    """Small-deflection model: `mass`, `stiffness` [kg, N/m] over the free node deflections,
+    `contact_row` (w_contact = contact_row @ w)."""
+
+    mass: np.ndarray
+    stiffness: np.ndarray
+    contact_row: np.ndarray
+
+
+@dataclass(frozen=True)
+class HenckyChain:
+    """N segments of a beam (see the module docstring). Lengths in m, masses in kg, inertias in
+    kg m^2, stiffnesses in N m/rad."""
+
+    n: int
+    length: float
+    segment_length: float
+    segment_mass: float
+    rotary_inertia: float          # about the segment's centre, bending axis
+    hinge_stiffness: float         # EI/l
+    clamp_stiffness: float         # 2EI/l
+    support: str
+    hit_segment: int
+    hit_offset: float              # contact point's distance from the hit segment's left end [m]
+    height: float
+    width: float
+    rotary: str
+
+    def linear(self) -> ChainLinear:
+        n, l = self.n, self.segment_length
+        nodes = n + 1
+        m = np.zeros((nodes, nodes))
+        k = np.zeros((nodes, nodes))
+        bar_m = self.segment_mass / 4.0 * np.ones((2, 2)) + self.rotary_inertia / l**2 * np.array([[1, -1], [-1, 1]])
+        for i in range(n):
+            m[i:i + 2, i:i + 2] += bar_m
+        # rotation of bar i: (w_{i+1} - w_i)/l; hinge at node i turns by theta_i - theta_{i-1}
+        theta = np.zeros((n, nodes))
+        for i in range(n):
+            theta[i, i], theta[i, i + 1] = -1.0 / l, 1.0 / l
+        for i in range(1, n):
+            d = theta[i] - theta[i - 1]
+            k += self.hinge_stiffness * np.outer(d, d)
+        if self.support in ("clamped-clamped", "cantilever"):
+            k += self.clamp_stiffness * np.outer(theta[0], theta[0])
+        if self.support == "clamped-clamped":
+            k += self.clamp_stiffness * np.outer(theta[-1], theta[-1])
+        row = np.zeros(nodes)
+        xi = self.hit_offset / l
+        row[self.hit_segment], row[self.hit_segment + 1] = 1.0 - xi, xi
+        keep = np.arange(1, nodes if self.support == "cantilever" else nodes - 1)
+        return ChainLinear(m[np.ix_(keep, keep)], k[np.ix_(keep, keep)], row[keep])
+
+    def modes(self):
+        """The chain's modes seen from the contact point: `reference.beams.Modes` (omega [rad/s],
+        modal mass 1 kg for mass-normalised vectors, phi = the vectors at the contact point)."""
+        from scipy import linalg
+
+        from impactval.reference.beams import Modes
+
+        lin = self.linear()
+        w2, vecs = linalg.eigh(lin.stiffness, lin.mass)
+        omega = np.sqrt(np.clip(w2, 0.0, None))
+        return Modes(omega, np.ones_like(omega), lin.contact_row @ vecs, 0.0)
+
+    def frequencies(self) -> np.ndarray:
+        """Natural frequencies [rad/s], ascending (every mode of the chain)."""
+        from scipy import linalg
+
+        lin = self.linear()
+        return np.sqrt(np.clip(linalg.eigh(lin.stiffness, lin.mass, eigvals_only=True), 0.0, None))
+
+    def omega_max_with_ball(self, ball_mass: float, contact_stiffness: float) -> float:
+        """Highest frequency [rad/s] of chain + ball + a linear contact spring [N/m] between them."""
+        from scipy import linalg
+
+        lin = self.linear()
+        n = lin.mass.shape[0]
+        m = np.zeros((n + 1, n + 1))
+        k = np.zeros((n + 1, n + 1))
+        m[:n, :n], k[:n, :n] = lin.mass, lin.stiffness
+        m[n, n] = ball_mass
+        row = np.append(lin.contact_row, -1.0)
+        k += contact_stiffness * np.outer(row, row)
+        return float(math.sqrt(max(float(linalg.eigh(k, m, eigvals_only=True)[-1]), 0.0)))
+
+
+def hencky_chain(beam, n: int, rotary: str = "none") -> HenckyChain:
+    """The N-segment Hencky chain of `beam` (a scenarios.scene.Beam); see the module docstring."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise ValueError(f"a Hencky chain needs at least 2 segments, got {n!r}")
+    if rotary not in ("none", "section"):
+        raise ValueError(f"rotary must be 'none' or 'section', got {rotary!r}")
+    mat = beam.material
+    l = beam.length / n
+    ei = mat.young * beam.second_moment
+    m_seg = mat.density * beam.area * l
+    j = m_seg * (l * l + (beam.height**2 if rotary == "section" else 0.0)) / 12.0
+    hit = min(int(beam.impact_x / l), n - 1)
+    return HenckyChain(n, beam.length, l, m_seg, j, ei / l, 2.0 * ei / l, beam.support, hit,
+                       beam.impact_x - hit * l, beam.height, beam.width, rotary)
+
+
+@dataclass(frozen=True)
+class ChainModelError:
+    """Relative errors of the chain model (chain's exact modes vs continuum), signed (chain-cont)/cont."""
+
+    t_m: float
+    f_m: float
+    delta_m: float
+
+    @property
+    def largest(self) -> float:
+        return max(abs(self.t_m), abs(self.f_m), abs(self.delta_m))
+
+
+@lru_cache(maxsize=8)
+def _continuum_metrics(scene) -> tuple[float, float, float]:
+    from impactval.reference.solve import solve
+
+    r = solve(scene, tol=MODEL_ERROR_REF_TOL)
+    return r.t_m, r.f_m, r.delta_m
+
+
+def model_error(scene, chain: HenckyChain) -> ChainModelError:
+    """The chain's discretisation error on t_m, f_m, delta_m: the reference solver on the chain's
+    own modes against the continuum reference (both at MODEL_ERROR_REF_TOL)."""
+    from impactval.reference.solve import solve_modes
+
+    ball = scene.ball
+    run, _ = solve_modes(chain.modes(), ball.mass, scene.alpha, ball.velocity, MODEL_ERROR_REF_TOL)
+    m = run.metrics
+    t, f, d = _continuum_metrics(scene)
+    return ChainModelError(m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0)
+
+
+def continuum_frequencies(beam, n: int) -> np.ndarray:
+    from impactval.reference.beams import beam_frequencies
+
+    mat = beam.material
+    return beam_frequencies(beam.support, n, beam.length, mat.young, beam.second_moment, mat.density, beam.area)
+
+
+@dataclass(frozen=True)
+class ChainSizing:
+    """How N was chosen: `n` segments, `modes_that_matter` (required_modes count), their largest
+    relative frequency error `frequency_error`, the chain's `model_error` (largest over the metrics)."""
+
+    n: int
+    modes_that_matter: int
+    frequency_error: float
+    model_error: ChainModelError
+
+
+def _freq_error(beam, chain: HenckyChain, count: int) -> float:
+    if count <= 0:
+        return 0.0
+    ch = chain.frequencies()[:count]
+    cont = continuum_frequencies(beam, len(ch))
+    return float(np.max(np.abs(ch / cont - 1.0)))
+
+
+def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", max_segments: int = 400,
+                 adjust=None) -> ChainSizing:
+    """Segments for `scene`'s beam so that the modes that matter are within `tol` in frequency and
+    the chain's model error on t_m, f_m, delta_m is within `tol` (see the module docstring).
+    `adjust(n) -> n` lets an engine move N (e.g. PyBullet: impact point near a segment centre)."""
+    from impactval.reference.modechoice import required_modes
+
+    beam = scene.target
+    adjust = adjust or (lambda n: n)
+    count = required_modes(scene, tol).count
+    n = adjust(max(MIN_SEGMENTS, 4 * count))
+    for _ in range(6):            # frequency criterion: error ~ (j/N)^2
+        err = _freq_error(beam, hencky_chain(beam, n, rotary), count)
+        if err <= tol or n >= max_segments:
+            break
+        n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(err / tol) * 1.05))))
+    me = model_error(scene, hencky_chain(beam, n, rotary))
+    for _ in range(4):            # the metric criterion, the same 1/N^2 law
+        if me.largest <= tol or n >= max_segments:
+            break
+        n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(me.largest / tol) * 1.05))))
+        me = model_error(scene, hencky_chain(beam, n, rotary))
+    return ChainSizing(n, count, _freq_error(beam, hencky_chain(beam, n, rotary), count), me)
+
+
+def centred(impact_at: float, lo: int, hi: int, prefer: int) -> int:
+    """The N in [lo, hi] that puts the impact point nearest a segment's centre (a point at a hinge is
+    softer: mid-span N = 100 vs 101 differ by ~1 % in t_m), ties broken by closeness to `prefer`."""
+    def off_centre(n: int) -> float:
+        return round(abs((impact_at * n) % 1.0 - 0.5), 6)
+
+    return min(range(max(lo, 2), max(hi, lo, 2) + 1), key=lambda n: (off_centre(n), abs(n - prefer)))
+
+
+def centring(impact_at: float, max_segments: int):
+    """An `adjust` for segments_for: move N up by at most 10 % to centre the impact point on a segment."""
+    def adjust(n: int) -> int:
+        n = min(n, max_segments)
+        step = max(2, n // 10)
+        hi = min(max_segments, n + step)
+        lo = n if hi - n >= 2 else max(2, hi - step)      # at the cap: look below it
+        return centred(impact_at, lo, hi, n)
+    return adjust
+
+
+def modal_omega_max(omega, modal_mass, phi, ball_mass: float, contact_stiffness: float) -> float:
+    """Highest frequency [rad/s] of a modal target (one oscillator per mode, mass m_i/phi_i^2) + the ball on a
+    linear contact spring [N/m] (delta = ball displacement - sum of the oscillators')."""
+    from scipy import linalg
+
+    om, mm, ph = (np.asarray(a, float) for a in (omega, modal_mass, phi))
+    keep = np.abs(ph) > 1e-12
+    om, mi = om[keep], mm[keep] / ph[keep] ** 2
+    n = len(om)
+    m = np.diag(np.concatenate(([ball_mass], mi)))
+    k = np.diag(np.concatenate(([0.0], mi * om**2)))
+    row = np.concatenate(([1.0], -np.ones(n)))
+    k += contact_stiffness * np.outer(row, row)
+    return float(math.sqrt(max(float(linalg.eigh(k, m, eigvals_only=True)[-1]), 0.0)))
+
+
+def omega_max(scene, law, chain: HenckyChain | None = None) -> tuple[float, str]:
+    """(highest frequency [rad/s] of the explicit model: structure + ball + contact spring at its tangent
+    stiffness at the rigid-plate delta_m (the largest approach), a one-line description)."""
+    from impactval.reference.hertz import plate_impact
+
+    ball = scene.ball
+    p = plate_impact(ball.mass, scene.alpha, ball.velocity)
+    k = law.stiffness(p.delta_m)
+    target = scene.target
+    if chain is not None:
+        return chain.omega_max_with_ball(ball.mass, k), (f"Hencky chain N = {chain.n} + ball + contact spring "
+                                                        f"{k:.3g} N/m")
+    if target.kind == "modal":
+        return modal_omega_max(target.omega, target.modal_mass, target.phi, ball.mass, k), \
+            f"{len(target.omega)} modal oscillators + ball + contact spring {k:.3g} N/m"
+    return math.sqrt(k / ball.mass), f"ball on the contact spring {k:.3g} N/m"
