@@ -80,13 +80,15 @@ def check_run_number(option: str, value: Any) -> float:
 
 
 def check_engine_steps(scenes, dts, tail: float) -> None:
-    """Refuse a run whose engine jobs would take more than MAX_ENGINE_STEPS steps, with the estimate.
+    """Refuse a run whose engine jobs would take more than MAX_ENGINE_STEPS steps, with the estimate
+    (for the numeric time steps in `dts`; "auto" is skipped).
 
     An engine simulates the contact (at least one rigid-plate contact time) plus `tail` [s] per job; the rigid-plate
     time is a lower bound of the real contact time, so the estimate is a lower bound too.
     """
     from impactval.reference.hertz import plate_impact
 
+    dts = [dt for dt in dts if is_real(dt)]      # "auto": the engine picks its step; nothing to estimate here
     for sc in scenes:
         t_plate = plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity).t_m
         for dt in dts:

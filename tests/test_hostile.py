@@ -181,7 +181,7 @@ def test_run_options_refused_before_any_job(tmp_path_factory, dt, timeout, tail,
     """`run` options: bad values exit 2 naming the option; good ones reach the engines (here an adapter
     that cannot load: a `crashed` row, exit 1) without a traceback."""
     out = tmp_path_factory.mktemp("run")
-    res = invoke(["run", "plate_steel", "--engines", "impactval_no_such_module:Adapter", "--dt", dt, "--timeout", timeout,
+    res = invoke(["run", "plate_steel", "--engines", "fake_engines:Raises", "--dt", dt, "--timeout", timeout,
                   "--tail", tail, "--threshold", threshold, "--segments", segments, "--out", str(out)])
     assert res.exit_code in (1, 2), res.output
     assert "Traceback" not in res.output
@@ -200,7 +200,7 @@ def test_output_paths_checked_first(tmp_path_factory, path):
     p = path.replace("FILE", str(base / "FILE")).replace("DIR", str(base / "DIR"))
     for args, option in ((["reference", "plate_steel", "--curve", p], "--curve"),
                          (["theory", "plate_steel", "--no-plot", "--out", p + "-theory"], "--out"),
-                         (["run", "plate_steel", "--engines", "impactval_no_such_module:A", "--out", p + "-run"], "--out")):
+                         (["run", "plate_steel", "--engines", "fake_engines:Raises", "--out", p + "-run"], "--out")):
         if path in ("", " ", "FILE", "DIR"):
             args[-1] = p          # these stay as they are
         res = invoke(args)
