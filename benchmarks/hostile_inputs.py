@@ -323,7 +323,7 @@ def cli_cases(d: Path) -> list[Case]:
             ("--jobs 0", ["--jobs", "0"], "refuse", "--jobs", "runs-at-scale"),
             ("--tag nosuchtag", ["--tag", "nosuchtag"], "refuse", "tag", "runs-at-scale"),
     ):
-        cases.append(Case(f"run {label}", ["run", "plate_steel", "--engines", "nosuch_mod:A", "--out", str(d / "rs"),
+        cases.append(Case(f"run {label}", ["run", "plate_steel", "--engines", "mujoco", "--out", str(d / "rs"),
                                            *args], e, names, owner))
     cases += [
         Case("no command", [], "either"),
