@@ -14,7 +14,8 @@ import click
 
 from impactval.errors import ImpactvalError
 from impactval.checks import (MAX_ENGINE_MODES, MAX_SEGMENTS, check_answer, check_engine_steps, check_run_number,
-                              check_tol, check_window)
+                              check_tol)
+from impactval.checks import check_window as check_window_arg
 from impactval.paths import check_output_dir, check_output_file, write_guard
 
 
@@ -113,7 +114,7 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     if curve is not None:
         check_output_file(curve, "--curve")
     check_tol(tol)
-    check_window(window)
+    check_window_arg(window)
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
