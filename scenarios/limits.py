@@ -55,7 +55,7 @@ LIMITS: dict[str, Limit] = {
                            "is sub-atomic) to 1 km/s, well below the sound speed of solids (3-6 km/s)"),
     "ball.mass": Limit(1e-18, 2e8, "kg", "from a 1 um ball of the lightest material (4e-18 kg) to a 10 m ball "
                        "of the densest (1.3e8 kg); given, or density x volume"),
-    "materials.young": Limit(1e4, 2e12, "Pa", "from soft gels (~10 kPa) to diamond (1.2 TPa)"),
+    "materials.young": Limit(1e4, 1e13, "Pa", "from soft gels (~10 kPa) past diamond (1.2 TPa) to 10 TPa, for stiffness sweeps"),
     "materials.poisson": Limit(-1.0, 0.5, "-", "thermodynamic bounds of an isotropic solid; 0.5 "
                                "(incompressible) makes the contact modulus singular", open_low=True, open_high=True),
     "materials.density": Limit(1.0, 3e4, "kg/m^3", "from aerogels (~1) to osmium (22 600)"),
@@ -84,9 +84,11 @@ MAX_SECTION_ASPECT = 100.0
 #: a plate's larger side over its thickness: thinner is a foil (the mode count, and the solve time,
 #: grow without bound: side/thickness 374 solved in 5 s, 780 in 58 s, 1300 in > 100 s, measured)
 MAX_PLATE_SLENDERNESS = 400.0
-#: names and tags: ASCII letters, digits, "_", "-", "." (not first), at most 64 characters; they become
-#: file names, XML attributes, CSV cells and markdown table cells, where anything else needs escaping
-NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+#: names and tags: ASCII letters, digits, "_", "-", "." and (for derived names such as
+#: "plate_steel[velocity=0.5]") "[", "]", "=", ",", "+", starting with a letter or digit, at most 128
+#: characters; they become file names, XML attributes, CSV cells and markdown table cells, where
+#: anything else (quotes, "<", "&", "|", "/", spaces, newlines) would need escaping
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-\[\]=,+]{0,127}")
 #: the longest description (one printable line)
 MAX_DESCRIPTION = 500
 
@@ -146,15 +148,15 @@ def check_name(src: str, key: str, value: Any, section: str = "") -> str:
     """A scene name, tag or material name from the safe set `NAME_RE`."""
     if not isinstance(value, str) or not NAME_RE.fullmatch(value):
         shown = repr(value) if not isinstance(value, str) or len(value) <= 80 else repr(value[:80]) + "..."
-        raise SceneError(f"{_where(src, section)} {key} must be 1-64 ASCII letters, digits, '_', '-' or '.' "
-                         f"(not starting with '.' or '-'; it becomes a file name and a cell of the reports), "
+        raise SceneError(f"{_where(src, section)} {key} must be 1-128 ASCII letters, digits and _ - . [ ] = , + "
+                         f"(starting with a letter or digit; it becomes a file name and a cell of the reports), "
                          f"got {shown}.")
     return value
 
 
 def safe_name(text: str) -> str:
     """`text` mapped into the safe set (for names taken from file stems): other characters become '_'."""
-    out = re.sub(r"[^A-Za-z0-9_.\-]+", "_", text).lstrip(".-")[:64]
+    out = re.sub(r"[^A-Za-z0-9_.\-\[\]=,+]+", "_", text).lstrip("._-[]=,+")[:128]
     return out or "scene"
 
 
