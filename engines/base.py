@@ -26,7 +26,8 @@ below both DT_MARGIN * dt_limit and t_plate / STEPS_PER_CONTACT), refusing a dt 
 limit (status unstable, message with the limit and a suggested dt), the loop, ONE simulation window
 (until the first contact ends, plus `settings.tail`; never beyond WINDOW_CAP rigid-plate contact
 times + tail), timing (build and stepping apart), sampling once per step, divergence (NaN/inf,
-energy growth beyond `energy_growth_limit`, the ball through the target: delta > ball radius), the
+energy growth beyond `energy_growth_limit`, the ball through the target: delta > ball radius, or the
+smaller radius for a second ball), the
 metrics (`contacts_from_series`), and the status with one message table (`MESSAGES`).
 
 **Whole-run adapter** (subclass `EngineAdapter`; engines that integrate a run themselves: Exudyn's
@@ -213,9 +214,36 @@ def nice_step(dt: float) -> float:
 
 
 def plate_times(scene):
+    """The rigid-plate Hertz impact of the scene's contact (closed form): for a second ball (target kind
+    "ball") the equivalent ball on a plate (reduced mass m1 m2/(m1 + m2), approach speed v1 + v2, same
+    alpha; reference/spheres.py), so t_m, delta_m and k0 are those of the two-ball contact."""
     from impactval.reference.hertz import plate_impact
 
-    return plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    sc = contact_scene(scene)
+    return plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity)
+
+
+def contact_scene(scene):
+    """The scene as the reference's contact model sees it (`reference.structure.contact_scene`): a second
+    ball becomes the equivalent ball (mass m*, speed v1 + v2) on a rigid plate; other scenes unchanged."""
+    if scene.target.kind != "ball":
+        return scene
+    from impactval.reference.structure import contact_scene as equivalent
+
+    return equivalent(scene)
+
+
+def contact_mass(scene) -> float:
+    """The mass [kg] the contact spring acts on for a rigid target: the ball's, or the reduced mass
+    m1 m2/(m1 + m2) of two free balls (their relative motion)."""
+    return contact_scene(scene).ball.mass
+
+
+def through_depth(scene) -> float:
+    """Approach [m] beyond which the ball has gone through the target: the ball's radius, or the smaller of
+    the two radii for a second ball."""
+    r = scene.ball.radius
+    return min(r, scene.target.radius) if scene.target.kind == "ball" else r
 
 
 class EngineAdapter:
@@ -242,7 +270,7 @@ class EngineAdapter:
             return Plan()
         p = plate_times(scene)
         k = law.stiffness(p.delta_m)
-        return Plan(2.0 / math.sqrt(k / scene.ball.mass), "ball on the contact spring's tangent stiffness at f_m")
+        return Plan(2.0 / math.sqrt(k / contact_mass(scene)), "ball on the contact spring's tangent stiffness at f_m")
 
     def explicit(self, settings: EngineSettings) -> bool:
         """True when the integrator has a stability limit (default: yes)."""
@@ -430,7 +458,7 @@ class SteppingAdapter(EngineAdapter):
         plate = plate_times(scene)
         t_cap = WINDOW_CAP * plate.t_m + settings.tail
         n_max = int(math.ceil(t_cap / dt))
-        through = scene.ball.radius
+        through = through_depth(scene)
         t0 = time.perf_counter()
         model = self.build(scene, settings)
         try:
@@ -682,5 +710,5 @@ def run_isolated(spec: str, scene, settings: EngineSettings) -> ImpactResult:
 
 
 __all__ = ["EngineAdapter", "SteppingAdapter", "EngineSettings", "Simulation", "Plan", "EngineDiverged",
-           "contacts_from_series", "execute_job", "run_isolated", "load_adapter", "adapter_class", "CONTACT_MODES",
+           "contacts_from_series", "execute_job", "plate_times", "contact_scene", "contact_mass", "through_depth", "run_isolated", "load_adapter", "adapter_class", "CONTACT_MODES",
            "MESSAGES", "message", "DT_MARGIN", "STEPS_PER_CONTACT", "WINDOW_CAP", "nice_step"]

@@ -286,7 +286,10 @@ def omega_max(scene, law, chain: HenckyChain | None = None) -> tuple[float, str]
     """(highest frequency [rad/s] of the explicit model: structure + ball + contact spring at its tangent
     stiffness at the rigid-plate delta_m (the largest approach), a one-line description)."""
     from impactval.reference.hertz import plate_impact
+    from impactval.reference.structure import contact_scene
 
+    two_balls = scene.target.kind == "ball"
+    scene = contact_scene(scene)      # a second ball: the relative motion (reduced mass, approach speed)
     ball = scene.ball
     p = plate_impact(ball.mass, scene.alpha, ball.velocity)
     k = law.stiffness(p.delta_m)
@@ -297,4 +300,6 @@ def omega_max(scene, law, chain: HenckyChain | None = None) -> tuple[float, str]
     if target.kind == "modal":
         return modal_omega_max(target.omega, target.modal_mass, target.phi, ball.mass, k), \
             f"{len(target.omega)} modal oscillators + ball + contact spring {k:.3g} N/m"
+    if two_balls:
+        return math.sqrt(k / ball.mass), f"two balls (reduced mass {ball.mass:.4g} kg) on the contact spring {k:.3g} N/m"
     return math.sqrt(k / ball.mass), f"ball on the contact spring {k:.3g} N/m"

@@ -9,7 +9,8 @@ adapter does not offer) on a violation. Third-party adapters run them with
 or parametrise pytest over `CHECKS` as tests/test_engine_contract.py does. A known gap is declared in
 the adapter's `expected_failures = {"check_name": "reason"}` and is a strict xfail (a declared gap that
 passes is an error too). The checks use the catalogue's rigid-plate scene (closed form, paper eq. 31-33)
-so they are exact, fast and engine-independent; `check_beam_model` also builds the worked beam.
+so they are exact, fast and engine-independent; `check_beam_model` also builds the worked beam and
+`check_ball_on_ball` two free spheres (closed form with the reduced mass, reference/spheres.py).
 """
 from __future__ import annotations
 
@@ -205,10 +206,49 @@ def check_beam_model(adapter: EngineAdapter) -> None:
         assert abs(got / want - 1) <= r.model_error + 5e-3, (got, want, r.model_error)
 
 
+def check_ball_on_ball(adapter: EngineAdapter) -> None:
+    """Two free spheres (catalogue ball_ball_steel_on_aluminium: different radii, materials and masses, the
+    second at rest) with injected Hertz at every default: t_m, f_m, delta_m within PLATE_TOL of the closed form
+    (reduced mass, alpha of both curvatures and both moduli), the first ball leaves with the elastic-exchange
+    velocity within 1 %, energy of both balls conserved within 1 %, the automatic step resolves the two-ball
+    contact time (not the first ball's on a plate, 13 % longer here). With a native contact that is linear, its
+    coefficient is the two-ball k0 (so the row gets the linear-theory comparison)."""
+    import impactval
+    from impactval.reference.spheres import reduced_mass, two_sphere_impact, two_sphere_velocities_after
+
+    sc = impactval.load_scene("ball_ball_steel_on_aluminium")
+    closed = two_sphere_impact(sc)
+    try:
+        r = adapter.run(sc, EngineSettings())
+    except EngineError as err:
+        raise CheckSkipped(str(err)) from None
+    if r.status == Status.SKIPPED:
+        raise CheckSkipped(r.message)
+    _ok(r)
+    for got, want, what in ((r.t_m, closed.t_m, "t_m"), (r.f_m, closed.f_m, "f_m"),
+                            (r.delta_m, closed.delta_m, "delta_m")):
+        assert abs(got / want - 1) <= PLATE_TOL, f"{what}: {got} vs closed form {want}"
+    assert isinstance(r.contact_law, ContactLaw) and r.contact_law.kind == "hertz"
+    assert abs(r.contact_law.coefficient / sc.alpha - 1) <= 1e-12
+    u1, _ = two_sphere_velocities_after(sc)
+    assert abs(-r.rebound_velocity / u1 - 1) <= 1e-2, (r.rebound_velocity, u1)
+    assert r.energy_error <= 1e-2, r.energy_error
+    assert r.dt <= closed.t_m / STEPS_PER_CONTACT * (1 + 1e-12), (r.dt, closed.t_m)
+    if math.isfinite(r.dt_limit):
+        assert r.dt <= DT_MARGIN * r.dt_limit * (1 + 1e-12)
+    if "native" in adapter.contacts:
+        law = adapter.contact_law(sc, EngineSettings(contact="native"))
+        if law is not None and law.kind == "linear":
+            from impactval.reference.hertz import plate_impact
+
+            k0 = plate_impact(reduced_mass(sc), sc.alpha, sc.ball.velocity + sc.target.velocity).k0
+            assert abs(law.coefficient / k0 - 1) <= 1e-9, (law.coefficient, k0)
+
+
 CHECKS = [check_plate_hertz, check_native_linear_plate, check_result_shape, check_rerun_bit_identical,
           check_auto_dt, check_dt_above_limit_refused, check_energy_conserved, check_window_rule,
           check_unknown_option_refused, check_unsupported_settings_refused, check_execute_job_never_raises,
-          check_structure_frequencies_array, check_beam_model]
+          check_structure_frequencies_array, check_beam_model, check_ball_on_ball]
 
 
 def run_checks(adapter: EngineAdapter) -> dict[str, str]:

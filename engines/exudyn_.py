@@ -5,6 +5,8 @@ with velocity -v0 in y. The target is
 - a rigid plate: the top of a ground "sphere" of the ball's radius (Exudyn needs radii > 0; the
   motion is along the line of centres, so the gap is exactly the plate's);
 - a modal target (kind "modal"): an FFRF body with the given omega, modal masses and phi;
+- a second ball (kind "ball"): another `NodePoint` + `MassPoint` (centre at y = -R2, moving at +v2); the
+  contact (native `ObjectContactSphereSphere` or the injected spring-damper) joins the two centres;
 - a beam: an `ObjectFFRFreducedOrder` body whose floating frame is fixed to the ground by six
   `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the impact
   section's centroid (contact radius h/2, so the ball touches the top face). Two beam models,
@@ -60,10 +62,9 @@ from typing import Any
 import numpy as np
 
 from impactval.engines.base import (WINDOW_CAP, EngineAdapter, EngineDiverged, EngineSettings, Plan, Simulation,
-                                    contacts_from_series)
+                                    contact_mass, contacts_from_series, plate_times)
 from impactval.engines.options import boolean, in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
-from impactval.reference.hertz import plate_impact
 
 #: name -> exudyn.DynamicSolverType member
 SOLVERS = {"generalized-alpha": "GeneralizedAlpha", "trapezoidal": "TrapezoidalIndex2",
@@ -207,9 +208,9 @@ class ExudynAdapter(EngineAdapter):
         if not self.explicit(settings):
             return Plan(math.inf, "implicit integrator", err, diag)
         law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
-        k = law.stiffness(plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).delta_m)
-        if structure is None:
-            om = math.sqrt(k / scene.ball.mass)
+        k = law.stiffness(plate_times(scene).delta_m)
+        if structure is None:       # a rigid plate, or a second ball (the reduced mass)
+            om = math.sqrt(k / contact_mass(scene))
         else:
             om = modal_omega_max(structure.omega, np.diag(structure.mass_reduced), structure.phi_contact,
                                  scene.ball.mass, k)
@@ -230,12 +231,12 @@ class ExudynAdapter(EngineAdapter):
 
     def _make_structure(self, scene, settings: EngineSettings) -> _Structure | None:
         target = scene.target
-        if target.kind == "rigid-plate":
-            return None
+        if target.kind in ("rigid-plate", "ball"):
+            return None         # no modal body (a second ball is a free mass point, see _add_second_ball)
         if target.kind == "modal":
             return _modal_target_structure(scene)
         if target.kind != "beam":
-            raise EngineError(f"exudyn: target kind {target.kind!r} is not supported (rigid-plate, beam, modal are).")
+            raise EngineError(f"exudyn: target kind {target.kind!r} is not supported (rigid-plate, beam, modal, ball are).")
         n = settings.modes or default_modes(scene, float(settings.option("mode_tol", DEFAULT_MODE_TOL)))
         if settings.option("beam_model", "fem") == "reference-modes":
             return _reference_modes_structure(target, n)
@@ -251,7 +252,7 @@ class ExudynAdapter(EngineAdapter):
         t0 = time.perf_counter()
         structure = self._structure(scene, settings)
         plan_s = time.perf_counter() - t0
-        plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+        plate = plate_times(scene)      # a second ball: the two-ball contact (reduced mass)
         window = WINDOW_START * plate.t_m + settings.tail
         while True:
             sim = self._run_window(scene, settings, structure, plate, window)
@@ -285,7 +286,11 @@ class ExudynAdapter(EngineAdapter):
         sc = exu.SystemContainer()
         mbs = sc.AddSystem()
         ground = mbs.AddObject(eii.ObjectGround())
-        if structure is None:
+        n_ball2 = None
+        if scene.target.kind == "ball":
+            m_target, n_ball2, contact_point, target_radius = self._add_second_ball(mbs, eii, scene)
+            n_modal = None
+        elif structure is None:
             # the plate surface y = 0 as the top of a ground sphere of the ball's radius (Exudyn needs radii
             # > 0; the motion is along the line of centres, so the gap is exactly the plate's)
             target_radius = ball.radius
@@ -307,6 +312,11 @@ class ExudynAdapter(EngineAdapter):
                                              **storage))
         s_vel = mbs.AddSensor(eii.SensorNode(nodeNumber=n_ball, outputVariableType=exu.OutputVariableType.Velocity,
                                              **storage))
+        if n_ball2 is not None:
+            s_pos2 = mbs.AddSensor(eii.SensorNode(nodeNumber=n_ball2,
+                                                  outputVariableType=exu.OutputVariableType.Displacement, **storage))
+            s_vel2 = mbs.AddSensor(eii.SensorNode(nodeNumber=n_ball2, outputVariableType=exu.OutputVariableType.Velocity,
+                                                  **storage))
         if n_modal is not None:
             s_q = mbs.AddSensor(eii.SensorNode(nodeNumber=n_modal, outputVariableType=exu.OutputVariableType.Coordinates,
                                                **storage))
@@ -331,7 +341,10 @@ class ExudynAdapter(EngineAdapter):
         x_ball = -pos[:, 2]
         v_ball = -vel[:, 2]
         energy_ball = 0.5 * ball.mass * np.sum(vel[:, 1:4] ** 2, axis=1)
-        if structure is None:
+        if n_ball2 is not None:       # the second ball's displacement away from the first, its kinetic energy
+            x_structure = -mbs.GetSensorStoredData(s_pos2)[:, 2]
+            energy_structure = 0.5 * scene.target.mass * np.sum(mbs.GetSensorStoredData(s_vel2)[:, 1:4] ** 2, axis=1)
+        elif structure is None:
             x_structure = np.zeros_like(t)
             energy_structure = np.zeros_like(t)
         else:
@@ -350,7 +363,7 @@ class ExudynAdapter(EngineAdapter):
         law_key = "contact_stiffness" if law == "linear" else "contact_alpha"
         diag: dict[str, Any] = {"contact_object": contact_name, "contact_law": law, law_key: stiffness,
                                 "contact_exponent": exponent, "solver": SOLVERS[integrator]}
-        model = "rigid plate"
+        model = "two spheres" if n_ball2 is not None else "rigid plate"
         if structure is not None:
             diag.update(structure.diagnostics)
             model = structure.model
@@ -418,6 +431,20 @@ class ExudynAdapter(EngineAdapter):
         return marker, body["nGenericODE2"]
 
     @staticmethod
+    def _add_second_ball(mbs, eii, scene):
+        """A second free sphere (target kind "ball"): a NodePoint + MassPoint of the target's mass, centre at
+        y = -R2 (top at y = 0, where the first ball touches), moving toward the first ball (+y) at the
+        target's velocity. Returns (its position marker, node, centre [m], radius [m]); the contact between
+        the two centres is the same object as on the plate (`_add_contact`)."""
+        target = scene.target
+        centre = np.array([0.0, -target.radius, 0.0])
+        node = mbs.AddNode(eii.NodePoint(referenceCoordinates=list(centre),
+                                         initialVelocities=[0.0, target.velocity, 0.0]))
+        mbs.AddObject(eii.MassPoint(mass=target.mass, nodeNumber=node))
+        marker = mbs.AddMarker(eii.MarkerNodePosition(nodeNumber=node))
+        return marker, node, centre, target.radius
+
+    @staticmethod
     def _add_contact(mbs, eii, exu, settings: EngineSettings, m_target, m_ball, stiffness: float, exponent: float,
                      target_radius: float, ball_radius: float, keep_alive: list) -> str:
         """The contact between the target marker (radius `target_radius` [m]) and the ball centre."""
@@ -458,7 +485,7 @@ def _law_numbers(scene, settings: EngineSettings) -> tuple[float, float]:
     """(contact stiffness, exponent) of the run: alpha and 1.5, or k0 and 1 with law=linear, unless the
     options contact_stiffness / contact_exponent set them."""
     if settings.option("law", "hertz") == "linear":
-        stiffness, exponent = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).k0, 1.0
+        stiffness, exponent = plate_times(scene).k0, 1.0     # a second ball: the two-ball contact's k0
     else:
         stiffness, exponent = scene.alpha, 1.5
     return (float(settings.option("contact_stiffness") or stiffness),

@@ -3,7 +3,9 @@
 `HertzSpringAdapter` follows the contract of `engines.base.SteppingAdapter` exactly as a real engine
 would, but each `step` moves the state along the exact solution: the Hertz half-period
 (`reference.hertz.PlateImpact.delta`) for contact "hertz", the sine of the linear spring k0 for
-contact "native"; after the contact the ball leaves at v0. So the contract, the loop, the window,
+contact "native"; after the contact the ball leaves at v0. A second ball (target kind "ball") is the
+same closed form for the relative motion (reduced mass, approach speed; reference/spheres.py), each
+ball's motion being the centre of mass's plus its share of delta. So the contract, the loop, the window,
 the metric code and the conformance suite are tested with no engine installed
 (`pytest -k fake`). Use it as "impactval.engines.fake_:HertzSpringAdapter".
 """
@@ -36,10 +38,13 @@ class _State:
     t_contact: float
     delta_of: object
     diagnostics: dict
+    share: float = 1.0           # ball 1's share of the relative motion, m2/(m1 + m2) (1 on a plate)
+    v_cm: float = 0.0            # centre-of-mass velocity toward the target [m/s] (two balls)
+    m_total: float = math.inf
 
 
 class HertzSpringAdapter(SteppingAdapter):
-    """A mass on a Hertz (or linear) spring, integrated in closed form; rigid plates only."""
+    """A mass on a Hertz (or linear) spring, integrated in closed form; rigid plates and second balls."""
 
     name = "fake"
     module = "math"
@@ -65,10 +70,14 @@ class HertzSpringAdapter(SteppingAdapter):
     def build(self, scene, settings: EngineSettings) -> _State:
         from impactval.reference.hertz import plate_impact
 
-        if scene.target.kind != "rigid-plate":
-            raise EngineError(f"fake: only rigid-plate scenes (the closed form), got a {scene.target.kind!r} target.")
+        from impactval.engines.base import contact_scene
+
+        if scene.target.kind not in ("rigid-plate", "ball"):
+            raise EngineError(f"fake: only rigid-plate and ball scenes (the closed form), got a {scene.target.kind!r} "
+                              f"target.")
         law = self.contact_law(scene, settings)
-        m, v0 = scene.ball.mass, scene.ball.velocity
+        rel = contact_scene(scene)          # a second ball: the relative motion
+        m, v0 = rel.ball.mass, rel.ball.velocity
         if law.kind == "hertz":
             p = plate_impact(m, law.coefficient, v0)
             t_c = p.t_m
@@ -81,7 +90,12 @@ class HertzSpringAdapter(SteppingAdapter):
 
             def delta_of(t):
                 return v0 / om * math.sin(om * t) if t < t_c else -v0 * (t - t_c)
-        return _State(0.0, float(settings.dt), law, m, v0, t_c, delta_of, {"closed_form_t_m": t_c})
+        state = _State(0.0, float(settings.dt), law, m, v0, t_c, delta_of, {"closed_form_t_m": t_c})
+        if scene.target.kind == "ball":
+            m1, m2 = scene.ball.mass, scene.target.mass
+            state.share, state.m_total = m2 / (m1 + m2), m1 + m2
+            state.v_cm = (m1 * scene.ball.velocity - m2 * scene.target.velocity) / (m1 + m2)
+        return state
 
     def step(self, model: _State) -> None:
         model.t += model.dt
@@ -100,10 +114,13 @@ class HertzSpringAdapter(SteppingAdapter):
 
     def energy(self, model: _State) -> float:
         d = model.delta_of(model.t)
-        return 0.5 * model.mass * self._speed(model) ** 2 + model.law.potential(d)
+        e_cm = 0.5 * model.m_total * model.v_cm**2 if math.isfinite(model.m_total) else 0.0
+        return 0.5 * model.mass * self._speed(model) ** 2 + model.law.potential(d) + e_cm
 
     def kinematics(self, model: _State) -> tuple[float, float, float]:
-        return model.delta_of(model.t), 0.0, self._speed(model)
+        d, x_cm = model.delta_of(model.t), model.v_cm * model.t
+        x1 = x_cm + model.share * d
+        return x1, x1 - d, model.v_cm + model.share * self._speed(model)
 
     def describe(self, model: _State) -> str:
         return f"closed-form {model.law.kind} spring"

@@ -21,6 +21,9 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
   and, at x = L, a `<connect>` pin plus a fixed tendon over all hinge angles (= the last segment's
   absolute rotation) of stiffness 2EI/l; cantilever = a 2EI/l hinge to the ground at x = 0, free end.
   The ball hits the segment that contains x = impact_at*L, at that point;
+- second ball (target kind "ball"): a free sphere of the target's mass and radius on its own slide joint
+  along z (centre at z = -R2, moving at +v2 toward the first ball); the contact spring acts on the
+  reduced mass (k0, dt auto and dt_limit from `engines.base.plate_times` / the two-ball contact);
 - modal target (contact "hertz" only): one oscillator per mode, mass m_i/phi_i^2 on a slide
   joint with stiffness (m_i/phi_i^2)*omega_i^2; the contact point moves by the sum of their
   displacements.
@@ -58,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from impactval.engines.base import EngineDiverged, EngineSettings, Plan, SteppingAdapter
+from impactval.engines.base import EngineDiverged, EngineSettings, Plan, SteppingAdapter, contact_scene, plate_times
 from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
 from impactval.engines.options import in_range, numbers, one_of, option, positive
 from impactval.errors import EngineError
@@ -183,6 +186,24 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool) -> tup
     return chain_xml, extra
 
 
+def _second_ball_xml(target, lay: _Layout) -> str:
+    """A second free sphere (target kind "ball") below the first, on its own slide joint along z: centre
+    at z = -R2, top (the contact point, site "hit") at z = 0. Its velocity is set after building."""
+    r2, m2 = target.radius, target.mass
+    i2 = 0.4 * m2 * r2 * r2
+    lay.kind, lay.top = "ball", 0.0
+    return (f'<body name="ball2" pos="{_vec(0, 0, -r2)}"><joint name="ball2_z" type="slide" axis="0 0 1"/>'
+            f'<inertial pos="0 0 0" mass="{_fmt(m2)}" diaginertia="{_vec(i2, i2, i2)}"/>'
+            f'<geom name="target" type="sphere" size="{_fmt(r2)}" contype="0" conaffinity="0" mass="0"/>'
+            f'<site name="hit" pos="{_vec(0, 0, r2)}" size="0.001"/></body>')
+
+
+def _set_second_ball_velocity(model, data, scene) -> None:
+    """The second ball moves toward the first (+z) at its scene velocity."""
+    if scene.target.kind == "ball":
+        data.qvel[model.jnt_dofadr[model.joint("ball2_z").id]] = scene.target.velocity
+
+
 def _modal_xml(target, lay: _Layout) -> str:
     parts = []
     for i, (om, mm, ph) in enumerate(zip(target.omega, target.modal_mass, target.phi)):
@@ -215,6 +236,8 @@ def build_xml(scene, settings: EngineSettings, chain: HenckyChain | None = None,
         if chain is None:
             chain = hencky_chain(target, default_segments(scene, settings), settings.option("rotary_inertia", "none"))
         world, extra = _beam_xml(target, chain, lay, native)
+    elif target.kind == "ball":
+        world = _second_ball_xml(target, lay)
     else:
         world = _modal_xml(target, lay)
     z_ball = lay.top + ball.radius
@@ -304,11 +327,11 @@ class _Run:
         self.__dict__.update(kw)
 
 
-SUPPORTED_KINDS = ("rigid-plate", "beam", "modal")
+SUPPORTED_KINDS = ("rigid-plate", "beam", "modal", "ball")
 
 
 def _check_kind(scene) -> None:
-    """Targets this adapter models; others (ball, Kirchhoff plate) become a `skipped` row."""
+    """Targets this adapter models; others (Kirchhoff plate) become a `skipped` row."""
     kind = scene.target.kind
     if kind not in SUPPORTED_KINDS:
         raise EngineError(f"mujoco: target kind {kind!r} is not supported; supported: {', '.join(SUPPORTED_KINDS)}.")
@@ -362,7 +385,7 @@ class MujocoAdapter(SteppingAdapter):
             err = me.largest
             diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m,
                         rotary_inertia=chain.rotary)
-        elif scene.target.kind == "rigid-plate":
+        elif scene.target.kind in ("rigid-plate", "ball"):
             err = 0.0
         return Plan(STABILITY[integ] / om, f"{integ}, {what}", err, diag)
 
@@ -370,8 +393,6 @@ class MujocoAdapter(SteppingAdapter):
     def build(self, scene, settings: EngineSettings) -> _Run:
         """The scene as a MuJoCo model at first touch, ready to step."""
         import mujoco
-
-        from impactval.reference.hertz import plate_impact
 
         _check_kind(scene)
         if scene.target.kind == "modal" and settings.contact != "hertz":
@@ -388,7 +409,7 @@ class MujocoAdapter(SteppingAdapter):
             model.eq_solref[:, 0] = tc
             model.eq_solref[:, 1] = 1.0
             info["equality_solref"] = (float(tc), 1.0)
-        plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+        plate = plate_times(scene)           # a second ball: the two-ball contact's (reduced mass)
         alpha = scene.alpha
         potential = (lambda dl: 0.4 * alpha * dl**2.5)
         if settings.contact != "hertz":
@@ -408,7 +429,7 @@ class MujocoAdapter(SteppingAdapter):
                 else:
                     potential = _tabulated_potential(mujoco, model, scene, plate)
             else:
-                k_scale, solimp, rms = fit_native_hertz(scene)
+                k_scale, solimp, rms = fit_native_hertz(contact_scene(scene))   # a second ball: its equivalent
                 solref = (-k_scale * a_inv_mass, 0.0)
                 model.pair_solref[0] = solref
                 model.pair_solimp[0] = solimp
@@ -418,6 +439,7 @@ class MujocoAdapter(SteppingAdapter):
         data = mujoco.MjData(model)
         probe = _Probe(mujoco, model, lay, scene, settings.contact)
         data.qvel[probe.ball_dof] = -scene.ball.velocity
+        _set_second_ball_velocity(model, data, scene)
         integ = settings.integrator or INTEGRATORS[0]
         run = _Run(mj=mujoco, model=model, data=data, lay=lay, probe=probe, contact_mode=settings.contact,
                    alpha=alpha, potential=potential, sync=integ in ("Euler", "implicitfast"),
@@ -500,7 +522,7 @@ class MujocoAdapter(SteppingAdapter):
         return chain_frequencies(run.mj, run.model)[:N_FREQUENCIES]
 
     def describe(self, run: _Run) -> str:
-        name = {"plate": "rigid-plate", "modal": f"modal-{run.lay.n_modes}"}.get(
+        name = {"plate": "rigid-plate", "modal": f"modal-{run.lay.n_modes}", "ball": "two-spheres"}.get(
             run.lay.kind, f"hencky-chain-{run.lay.n_segments}")
         return f"mujoco-{name}-{run.contact_mode}"
 

@@ -7,6 +7,9 @@ dt = "auto", the stability limit (refused before stepping when dt is above it) a
 Scene in Bullet (SI units; z is up, the ball moves down along -z with v0 and touches at t = 0):
 - ball: a sphere multibody of mass m0, no gravity, no damping, no friction, no restitution;
 - rigid plate: a static box whose top face is z = 0;
+- second ball (target kind "ball"): a free sphere multibody (centre at z = -R2, moving at +v2 toward the
+  first ball); injected Hertz acts on both balls, native contact is Bullet's sphere-sphere pair with the
+  two-ball k0 (reduced mass);
 - beam: the Hencky chain of `engines.chain.hencky_chain` (rotary inertia m l^2/12 of a rigid bar: the
   reference is Euler-Bernoulli) as N box links along x joined by revolute joints about y; the spring
   torques -K q (EI/l per hinge, 2EI/l per clamped end) are applied every step with TORQUE_CONTROL
@@ -62,11 +65,10 @@ from typing import Any
 
 import numpy as np
 
-from impactval.engines.base import EngineSettings, Plan, SteppingAdapter
+from impactval.engines.base import EngineSettings, Plan, SteppingAdapter, plate_times
 from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
 from impactval.engines.options import in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
-from impactval.reference.hertz import plate_impact
 
 NATIVE_ROUTES = ("global", "per-body")
 #: how many chain frequencies go into the diagnostics
@@ -220,8 +222,8 @@ class PybulletAdapter(SteppingAdapter):
         from impactval.reference.hertz import ContactLaw
 
         kind = scene.target.kind
-        if kind not in ("rigid-plate", "beam"):
-            raise EngineError(f"pybullet: target kind {kind!r} is not supported; use a rigid-plate or beam scene.")
+        if kind not in ("rigid-plate", "beam", "ball"):
+            raise EngineError(f"pybullet: target kind {kind!r} is not supported; use a rigid-plate, beam or ball scene.")
         chain = self.chain(scene, settings)
         law = self.contact_law(scene, settings) or ContactLaw.linear(plate_times_k0(scene))
         if settings.contact == "native-hertz":
@@ -267,7 +269,8 @@ class PybulletAdapter(SteppingAdapter):
         return w[w > 1e-6 * max(float(w.max()), 1.0)][:N_FREQUENCIES_REPORTED]
 
     def describe(self, run: "_Run") -> str:
-        return ((f"chain N={run.chain.n}" if run.chain is not None else "rigid plate") + f", contact {run.mode}"
+        what = f"chain N={run.chain.n}" if run.chain is not None else getattr(run, "target_name", "rigid plate")
+        return (what + f", contact {run.mode}"
                 + (f" ({run.route})" if run.mode == "native" else ""))
 
     def close(self, run: "_Run") -> None:
@@ -306,7 +309,8 @@ class PybulletAdapter(SteppingAdapter):
 
 
 def plate_times_k0(scene) -> float:
-    return plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).k0
+    """The paper's k0 [N/m] of the scene's contact (a second ball: of the two-ball contact, reduced mass)."""
+    return plate_times(scene).k0
 
 
 # ---------------------------------------------------------------------------- building
@@ -433,6 +437,10 @@ class _Run:
             self.q_all = self.qd_all = None
         self.d = self.z_point - (self.pos[2] - self.radius)
 
+    def other_energy(self) -> float:
+        """Kinetic energy [J] of bodies other than the ball and the chain (none here; see _TwoBallRun)."""
+        return 0.0
+
     def contact_potential(self, d: float, d_new: float) -> float:
         if d <= 0 or d_new <= 0:
             return 0.0
@@ -444,7 +452,7 @@ class _Run:
         """Energy [J] of the previous sample in the form semi-implicit Euler conserves exactly for linear
         systems: rates after the step, potentials as the product of the positions before and after
         (k/2 x_n x_n+1; Hertz (2/5) alpha (d_n d_n+1)^1.25). No O((omega dt)^2) ripple."""
-        e = 0.5 * self.m0 * self.vz * self.vz + self.contact_potential(d, self.d)
+        e = 0.5 * self.m0 * self.vz * self.vz + self.contact_potential(d, self.d) + self.other_energy()
         if self.chain is not None:
             n = self.n_rev
             q, qn, qd = q_all[-n:], self.q_all[-n:], self.qd_all
@@ -463,7 +471,7 @@ class _Run:
             f = self.alpha * d**1.5 if d > 0 else 0.0
             if f > 0:
                 c.applyExternalForce(self.ball_body, -1, [0, 0, f], pos, p.WORLD_FRAME)
-                if self.chain is not None:
+                if self.point is not None:      # a chain link or a second ball takes the reaction
                     c.applyExternalForce(self.body, self.link, [0, 0, -f], self.point, p.WORLD_FRAME)
         elif self.mode == "native-hertz":
             dd = d if d > self.delta_floor else self.delta_floor
@@ -480,12 +488,40 @@ class _Run:
         self.sample = (d, f, self.z_ball0 - pos[2], self.z_point0 - z_point, -vz, e)
 
 
+def _add_second_ball(c: _Client, target) -> int:
+    """A second free sphere (target kind "ball") of the target's mass and radius, centre at z = -R2 (top at
+    z = 0, where the first ball touches), moving toward the first ball (+z) at the target's velocity, no
+    gravity, damping, friction or restitution. Returns its body id."""
+    sphere = c.createCollisionShape(c.p.GEOM_SPHERE, radius=target.radius)
+    body = c.createMultiBody(baseMass=target.mass, baseCollisionShapeIndex=sphere, basePosition=[0, 0, -target.radius])
+    _no_losses(c, body, [-1])
+    c.resetBaseVelocity(body, [0, 0, target.velocity], [0, 0, 0])
+    return body
+
+
+class _TwoBallRun(_Run):
+    """A live two-ball job: the contact point is the second ball's top, which moves with it."""
+
+    def read(self) -> None:
+        self.pos = self.getpos(self.ball_body)[0]
+        self.vz = self.getvel(self.ball_body)[0][2]
+        pos2 = self.getpos(self.target_body)[0]
+        self.vz2 = self.getvel(self.target_body)[0][2]
+        self.point = (pos2[0], pos2[1], pos2[2] + self.r2)
+        self.z_point = self.point[2]
+        self.q_all = self.qd_all = None
+        self.d = self.z_point - (self.pos[2] - self.radius)
+
+    def other_energy(self) -> float:
+        return 0.5 * self.m2 * self.vz2 * self.vz2
+
+
 def _build(c: _Client, scene, settings: EngineSettings, chain: HenckyChain | None) -> _Run:
     p = c.p
     dt = float(settings.dt)
     ball = scene.ball
     m0, radius, v0, alpha = ball.mass, ball.radius, ball.velocity, scene.alpha
-    plate = plate_impact(m0, alpha, v0)
+    plate = plate_times(scene)          # a second ball: the two-ball contact (reduced mass, approach speed)
     k0 = plate.k0
     mode = settings.contact
     opt = settings.option
@@ -501,7 +537,12 @@ def _build(c: _Client, scene, settings: EngineSettings, chain: HenckyChain | Non
     body = link = None
     local = None
     lin = rev = all_j = k_rev = None
-    if chain is not None:
+    second = None
+    if target.kind == "ball":
+        second = _add_second_ball(c, target)
+        target_body, surface_z, ball_xy = second, 0.0, (0.0, 0.0)
+        body, link = second, -1         # the reaction of the injected force goes to the second ball
+    elif chain is not None:
         body, lin, rev, all_j, k_rev, link, local = _build_chain(c, target, chain)
         target_body = body
         surface_z = target.height / 2
@@ -542,15 +583,18 @@ def _build(c: _Client, scene, settings: EngineSettings, chain: HenckyChain | Non
         diagnostics["native_route"] = "global, CFM updated from the penetration each step"
     if chain is not None:
         diagnostics["segments"] = chain.n
-    run = _Run(client=c, p=p, chain=chain, body=body, link=link, local=list(local) if local else None, lin=None,
+    run = (_TwoBallRun if second is not None else _Run)(client=c, p=p, chain=chain, body=body, link=link, local=list(local) if local else None, lin=None,
                linear=lin, rev=rev, all_j=all_j, k_rev=k_rev, m_full=lin.mass if lin is not None else None,
                n_rev=len(rev) if rev else 0, ball_body=ball_body, target_body=target_body, surface_z=surface_z,
                radius=radius, m0=m0, alpha=alpha, mode=mode, route=route, erp=erp, dt=dt, k_native=k_native,
                delta_floor=1e-6 * plate.delta_m, mismatch=0.0, f_max=0.0, diagnostics=diagnostics, z_ball0=z_ball0,
                getpos=c.getBasePositionAndOrientation, getvel=c.getBaseVelocity)
+    if second is not None:
+        run.m2, run.r2 = target.mass, target.radius
+        run.target_name = "two spheres"
     run.read()
     run.z_point0 = run.z_point
-    e0 = 0.5 * m0 * run.vz**2 + (0.0 if run.d <= 0 else run.contact_potential(run.d, run.d))
+    e0 = 0.5 * m0 * run.vz**2 + (0.0 if run.d <= 0 else run.contact_potential(run.d, run.d)) + run.other_energy()
     f0 = alpha * run.d**1.5 if (mode == "hertz" and run.d > 0) else 0.0
     run.sample = (run.d, f0, 0.0, 0.0, -run.vz, e0)
     return run

@@ -354,7 +354,8 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @click.option("--scheduler", default=None, metavar="ADDR",
               help="Run the engine jobs on a Dask distributed scheduler (tcp://host:8786); needs impactval[dask].")
 @click.option("--force", is_flag=True, help="Recompute jobs already in the store (default: reuse them).")
-@click.option("--keep-series", is_flag=True, help="Also store each job's time series (compressed) in the store.")
+@click.option("--keep-series/--no-keep-series", default=True, show_default=True,
+              help="Store each job's time series (compressed) in the store; the report draws its force curves from them.")
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as JSON lines (SI units, errors as fractions).")
 @click.option("--baseline", default=None, type=click.Path(dir_okay=False),
               help="results.csv of an earlier run: mark rows worse (+), better (-), newly failing (!), fixed (*).")
@@ -406,14 +407,13 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
         click.echo(f"impactval: {note}", err=True)
     regressed = False
     if "baseline" in df.attrs:
-        from impactval.history import regressions
+        from impactval.history import flagged_lines, regressions, require_comparable
 
         cmp = df.attrs["baseline"]
-        flagged = cmp[cmp["mark"] != ""]
-        for _, r in flagged.iterrows():
-            click.echo(f"  {r['mark']} {r['scene']} / {r['engine']}: {r['old_status']} -> {r['status']}, "
-                       f"largest error {100 * r['old_score']:.3f} % -> {100 * r['score']:.3f} %", err=as_json)
-        click.echo(f"against {baseline}: {len(flagged)} of {len(cmp)} rows marked", err=as_json)
+        for line in flagged_lines(cmp):
+            click.echo(line, err=as_json)
+        click.echo(f"against {baseline}: {int((cmp['mark'] != '').sum())} of {len(cmp)} rows marked", err=as_json)
+        require_comparable(cmp, df, df.attrs["baseline_rows"], baseline)   # a drifted setup is exit 2, never a pass
         regressed = regressions(cmp)
     click.echo(f"run {df.attrs['run_id']}: {len(df)} rows ({df.attrs['n_reused']} reused from the store); "
                f"results: {Path(out) / 'results.csv'}, report: {Path(out) / 'report.md'}, store: {df.attrs['store']}",
@@ -434,6 +434,10 @@ def _print_rows(df, as_json: bool, text_table) -> None:
 
 
 main.add_command(__import__("impactval.cli_extremes", fromlist=["extremes"]).extremes)  # issue 14
+from impactval import cli_nightly as _cli_nightly  # noqa: E402 - commands in their own module
+main.add_command(_cli_nightly.nightly_command)
+main.add_command(_cli_nightly.report_command)
+
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -1,30 +1,113 @@
-"""Nightly history: compare a run with a baseline `results.csv` (style.md, pattern 12; asv's marks).
+"""Compare a run with an earlier one, like with like (style.md, pattern 12; asv's marks).
 
-Rows are matched on (scene, engine, contact, integrator, dt, segments). A pair is comparable only
-when both rows have the same `scene_hash` (the canonical scene plus the reference version), so a
-changed scene file or reference is never reported as an engine change. The score of a row is its
-largest |relative error| over t_m, f_m, delta_m. Marks:
+Rows are matched on KEY = (scene, engine, contact, integrator, dt, segments): the scene and the
+settings that fix what a job computes. A matched pair is comparable only when both rows have the
+same `scene_hash` (canonical scene + reference version), so a changed scene file or reference is
+never reported as an engine change. The engine version is a separate axis: rows of different engine
+versions are compared (that is what an upgrade check is for) and the report names both versions.
+
+Errors are deterministic, so every change is real; a row is flagged when the |error| of a metric
+grows past that metric's threshold (`parse_fail_on("f_m:+20%")`). Marks:
 
 | mark | meaning |
 |---|---|
-| `x` | not comparable (no baseline row, or the scene or reference changed) |
-| `!` | newly failing (the baseline row was ok, this one is not) |
-| `*` | fixed (the baseline row failed, this one is ok) |
-| `+` | worse: the score grew by more than the threshold (relative) and by more than 1e-5 |
-| `-` | better: the score shrank by more than the threshold and by more than 1e-5 |
+| `x` | not comparable (no baseline row with this key, or the scene or reference changed) |
+| `!` | newly failing (the baseline row had a result, this one has none) |
+| `*` | fixed (the baseline row failed, this one has a result) |
+| `+` | worse: some metric's |error| grew past its threshold |
+| `-` | better: some metric's |error| shrank past its threshold, none got worse |
+
+Wall times are noisy and are never compared pairwise: `wall_time_steps` looks for a step in the
+history of several nights (see there).
 """
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterable, Sequence
 
 import pandas as pd
 
 from impactval.errors import ImpactvalError
 
 KEY = ("scene", "engine", "contact", "integrator", "dt", "segments")
-#: smallest absolute change of the score that can be flagged
+#: error metrics compared pairwise: name -> results column (signed relative error; curve >= 0)
+METRICS = {"t_m": "err_t_m", "f_m": "err_f_m", "delta_m": "err_delta_m", "curve": "err_curve"}
+#: smallest absolute change of an |error| (as a fraction: 1e-5 = 0.001 percentage points) that can be flagged
 ABS_FLOOR = 1e-5
+#: default relative growth of |error| that flags a row (0.2 = +20 %)
+DEFAULT_THRESHOLD = 0.2
+#: default relative step of the stepping wall time, persisting over WALL_WINDOW nights, that flags a row
+DEFAULT_WALL_THRESHOLD = 0.5
+#: nights a wall-time step must persist; the history needs 2x this many nights before it judges
+WALL_WINDOW = 3
+
+
+@dataclass(frozen=True)
+class ThresholdCheck:
+    """When is a metric worse: its |error| grew by more than `rel` (relative, 0.2 = +20 %) or by more
+    than `abs_pp` percentage points (whichever is given), and by more than ABS_FLOOR in any case.
+    `metric` is one of METRICS or "wall_time" (stepping wall time, judged from the history)."""
+
+    metric: str
+    rel: float | None = None
+    abs_pp: float | None = None
+
+    def describe(self) -> str:
+        return f"{self.metric}:+{100 * self.rel:g}%" if self.rel is not None else f"{self.metric}:+{self.abs_pp:g}pp"
+
+    def verdict(self, old: float, new: float) -> tuple[float, str]:
+        """(relative change of |error|, "+" worse / "-" better / "" within) between two signed errors."""
+        if not (math.isfinite(old) and math.isfinite(new)):
+            return math.nan, ""
+        a, b = abs(old), abs(new)
+        change = (b - a) / a if a > 0 else (math.inf if b > 0 else 0.0)
+        if abs(b - a) <= ABS_FLOOR:
+            return change, ""
+        if self.rel is not None:
+            past = abs(change) > self.rel
+        else:
+            past = 100 * abs(b - a) > self.abs_pp
+        return change, ("+" if b > a else "-") if past else ""
+
+
+_FAIL_ON = re.compile(r"^\s*([a-z_]+)\s*:\s*\+?\s*([0-9.eE+-]+)\s*(%|pp)\s*$")
+
+
+def parse_fail_on(text: str) -> ThresholdCheck:
+    """'f_m:+20%' (|error| grows by 20 % of itself) or 'f_m:+0.5pp' (by 0.5 percentage points);
+    metrics: t_m, f_m, delta_m, curve, wall_time (stepping wall time, from the history)."""
+    m = _FAIL_ON.match(str(text))
+    allowed = ", ".join([*METRICS, "wall_time"])
+    if not m:
+        raise ImpactvalError(f"--fail-on takes METRIC:+N% or METRIC:+Npp (e.g. 'f_m:+20%', 'curve:+0.5pp'; "
+                             f"metrics: {allowed}), got {text!r}.")
+    metric, number, unit = m.groups()
+    if metric not in METRICS and metric != "wall_time":
+        raise ImpactvalError(f"--fail-on: unknown metric {metric!r} in {text!r}; known: {allowed}.")
+    try:
+        value = float(number)
+    except ValueError:
+        raise ImpactvalError(f"--fail-on: {number!r} in {text!r} is not a number.") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ImpactvalError(f"--fail-on: the threshold in {text!r} must be a positive number.")
+    if metric == "wall_time" and unit == "pp":
+        raise ImpactvalError(f"--fail-on: wall_time takes a relative step in % (e.g. 'wall_time:+50%'), got {text!r}.")
+    return ThresholdCheck(metric, rel=value / 100 if unit == "%" else None, abs_pp=value if unit == "pp" else None)
+
+
+def thresholds(fail_on: Iterable[str | ThresholdCheck] = (), default: float = DEFAULT_THRESHOLD) -> dict[str, ThresholdCheck]:
+    """One check per metric: the given ones, the default (relative `default`) for the others."""
+    if not (isinstance(default, (int, float)) and math.isfinite(default) and default > 0):
+        raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {default!r}.")
+    out = {m: ThresholdCheck(m, rel=float(default)) for m in METRICS}
+    out["wall_time"] = ThresholdCheck("wall_time", rel=DEFAULT_WALL_THRESHOLD)
+    for item in fail_on:
+        check = item if isinstance(item, ThresholdCheck) else parse_fail_on(item)
+        out[check.metric] = check
+    return out
 
 
 def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
@@ -36,7 +119,7 @@ def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
         df = pd.read_csv(p, keep_default_na=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise ImpactvalError(f"{p}: not a results.csv ({err}).") from None
-    for col in ("err_t_m", "err_f_m", "err_delta_m"):     # schema 3 exports errors in % as NAME_pct
+    for col in ("err_t_m", "err_f_m", "err_delta_m", "err_curve"):     # schema 3 exports errors in % as NAME_pct
         if col not in df and f"{col}_pct" in df:
             df[col] = pd.to_numeric(df[f"{col}_pct"], errors="coerce") / 100.0
     missing = [c for c in (*KEY, "status", "schema_version", "err_t_m", "err_f_m", "err_delta_m") if c not in df]
@@ -50,52 +133,97 @@ def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
     return df.drop_duplicates(list(KEY), keep="last")
 
 
+def _num(x) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
 def score(row) -> float:
     """Largest |relative error| over t_m, f_m, delta_m (NaN when the row has no numbers)."""
-    vals = [abs(float(row[k])) for k in ("err_t_m", "err_f_m", "err_delta_m")]
+    vals = [abs(_num(row[k])) for k in ("err_t_m", "err_f_m", "err_delta_m") if k in row]
     vals = [v for v in vals if math.isfinite(v)]
     return max(vals) if vals else math.nan
 
 
-def _key(row) -> tuple:
-    out = []
-    for k in KEY:
-        v = row[k]
-        if k == "dt":
-            v = float(v)
-        elif isinstance(v, float) and math.isnan(v):
-            v = ""
-        else:
-            v = str(v)
-            if k == "segments" and v.endswith(".0"):
-                v = v[:-2]
-        out.append(v)
-    return tuple(out)
+def _cell(k: str, v) -> object:
+    if k == "dt":                   # a time step [s], or a word such as "auto"
+        x = _num(v)
+        return x if math.isfinite(x) else str(v)
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return ""
+    v = str(v)
+    if k == "segments" and v.endswith(".0"):
+        v = v[:-2]
+    return v
 
 
-def compare(new: pd.DataFrame, old: pd.DataFrame, threshold: float = 0.2) -> pd.DataFrame:
-    """One row per new row: key, old and new score, relative change and the mark (see module doc)."""
-    if not (isinstance(threshold, (int, float)) and threshold > 0):
-        raise ImpactvalError(f"threshold must be a positive fraction (0.2 = 20 %), got {threshold!r}.")
-    base = {_key(r): r for _, r in old.iterrows()}
+def row_key(row) -> tuple:
+    """The comparison key of a row (KEY, normalised: dt as float, segments as text, NaN as '')."""
+    return tuple(_cell(k, row[k]) for k in KEY)
+
+
+def _ok(status) -> bool:
+    return str(status) == "ok"
+
+
+def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, ThresholdCheck] | None = None) -> pd.DataFrame:
+    """One row per new row: KEY, versions, statuses, old and new error and relative change of |error|
+    per metric (`old_err_f_m`, `err_f_m`, `change_f_m`, ...), the mark (see module doc), `why` (the
+    reason for the mark in words, with numbers) and `changed` (any metric differs at all).
+
+    `checks`: thresholds per metric (`thresholds(...)`), or one relative threshold for all."""
+    if checks is None or isinstance(checks, (int, float)):
+        checks = thresholds((), DEFAULT_THRESHOLD if checks is None else checks)
+    base = {}
+    for _, r in old.iterrows():
+        base[row_key(r)] = r                         # the newest row per key wins
     rows = []
     for _, r in new.iterrows():
-        o = base.get(_key(r))
-        s_new = score(r)
-        s_old = score(o) if o is not None else math.nan
-        mark, change = "", math.nan
-        if o is None or str(o.get("scene_hash", "")) != str(r.get("scene_hash", "")):
-            mark = "x"
-        elif o["status"] == "ok" and r["status"] != "ok":
-            mark = "!"
-        elif o["status"] != "ok" and r["status"] == "ok":
-            mark = "*"
-        elif r["status"] == "ok" and math.isfinite(s_new) and math.isfinite(s_old):
-            change = (s_new - s_old) / s_old if s_old > 0 else math.inf if s_new > 0 else 0.0
-            if abs(s_new - s_old) > ABS_FLOOR:
-                mark = "+" if change > threshold else "-" if change < -threshold else ""
-        rows.append({**{k: r[k] for k in KEY}, "old_status": "" if o is None else o["status"],
-                     "status": r["status"], "old_score": s_old, "score": s_new, "change": change, "mark": mark})
+        o = base.get(row_key(r))
+        out = {k: r[k] for k in KEY}
+        out.update(version=str(r.get("version", "") or ""), old_version="" if o is None else str(o.get("version", "") or ""),
+                   status=str(r["status"]), old_status="" if o is None else str(o["status"]),
+                   old_score=math.nan if o is None else score(o), score=score(r))
+        mark, why, changed = "", "", False
+        for m, col in METRICS.items():
+            a = _num(o.get(col)) if o is not None and col in o else math.nan
+            b = _num(r.get(col)) if col in r else math.nan
+            out[f"old_{col}"], out[col] = a, b
+            out[f"change_{m}"] = math.nan
+        if o is None:
+            mark, why = "x", "no baseline row with this scene, engine and settings"
+        elif str(o.get("scene_hash", "")) != str(r.get("scene_hash", "")):
+            mark, why = "x", f"scene or reference changed (scene hash {o.get('scene_hash', '')} -> {r.get('scene_hash', '')})"
+        elif _ok(o["status"]) and not _ok(r["status"]):
+            msg = " ".join(str(r.get("message", "") or "").split())
+            mark, why = "!", f"{o['status']} -> {r['status']}: {msg}".rstrip(": ")
+        elif not _ok(o["status"]) and _ok(r["status"]):
+            mark, why = "*", f"{o['status']} -> ok"
+        elif _ok(r["status"]):
+            worse, better = [], []
+            for m, col in METRICS.items():
+                a, b = out[f"old_{col}"], out[col]
+                if math.isfinite(a) and math.isfinite(b) and a != b:
+                    changed = True
+                change, verdict = checks[m].verdict(a, b)
+                out[f"change_{m}"] = change
+                text = f"{m} {100 * a:+.4g} % -> {100 * b:+.4g} % ({100 * change:+.0f} % in size)"
+                if verdict == "+":
+                    worse.append(text)
+                elif verdict == "-":
+                    better.append(text)
+            if worse:
+                mark, why = "+", "; ".join(worse)
+            elif better:
+                mark, why = "-", "; ".join(better)
+        if mark in ("+", "-", "!", "*") and out["old_version"] != out["version"]:
+            why += f" (engine version {out['old_version'] or '?'} -> {out['version'] or '?'})"
+        out.update(mark=mark, why=why, changed=changed)
+        old_s, new_s = out["old_score"], out["score"]
+        out["change"] = (new_s - old_s) / old_s if math.isfinite(old_s) and math.isfinite(new_s) and old_s > 0 else math.nan
+        rows.append(out)
     return pd.DataFrame(rows)
 
 
@@ -104,20 +232,108 @@ def regressions(cmp: pd.DataFrame) -> bool:
     return bool(cmp["mark"].isin(["+", "!"]).any()) if len(cmp) else False
 
 
-def markdown(cmp: pd.DataFrame, baseline: str | Path, threshold: float) -> str:
-    """The report section: marks first, then every compared row."""
-    def pct(x: float) -> str:
-        return "" if not math.isfinite(x) else f"{100 * x:.3f}"
+def comparable(cmp: pd.DataFrame) -> int:
+    """How many rows were compared (mark other than `x`)."""
+    return int((cmp["mark"] != "x").sum()) if len(cmp) else 0
 
-    out = ["", "## Against the baseline", "",
-           f"Baseline: `{baseline}`. Score = largest |error| of t_m, f_m, delta_m in %; marks: `+` worse by more "
-           f"than {threshold:.0%}, `-` better, `!` newly failing, `*` fixed, `x` not comparable (scene or "
-           f"reference changed, or no baseline row).", "",
-           "| mark | scene | engine | contact | dt [s] | N | baseline % | now % | change |",
-           "|---|---|---|---|---:|---:|---:|---:|---:|"]
-    order = {"!": 0, "+": 1, "*": 2, "-": 3, "x": 4, "": 5}
-    for _, r in cmp.sort_values("mark", key=lambda s: s.map(order), kind="stable").iterrows():
-        ch = "" if not math.isfinite(r["change"]) else f"{100 * r['change']:+.0f} %"
-        out.append(f"| {r['mark']} | {r['scene']} | {r['engine']} | {r['contact']} | {float(r['dt']):g} | "
-                   f"{r['segments']} | {pct(r['old_score'])} | {pct(r['score'])} | {ch} |")
-    return "\n".join(out) + "\n"
+
+def _fmt(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def differing_keys(new: pd.DataFrame, old: pd.DataFrame) -> list[str]:
+    """Why rows do not match: for each KEY column (and the scene hash) whose values differ between the
+    two runs, 'column: baseline A, B; now C' (values sorted, at most 4 each)."""
+    def values(df: pd.DataFrame, k: str) -> list[str]:
+        vals = sorted({_fmt(_cell(k, v)) for v in df[k]}) if k in df else []
+        return [v if v != "" else "(default)" for v in vals]
+
+    out = []
+    for k in (*KEY, "scene_hash"):
+        a, b = values(old, k), values(new, k)
+        if a != b:
+            short = lambda vs: ", ".join(vs[:4]) + (f" (+{len(vs) - 4} more)" if len(vs) > 4 else "")  # noqa: E731
+            out.append(f"{k}: baseline {short(a) or 'none'}; now {short(b) or 'none'}")
+    return out
+
+
+def require_comparable(cmp: pd.DataFrame, new: pd.DataFrame, old: pd.DataFrame, baseline: str) -> None:
+    """Raise ImpactvalError (exit 2) when no row could be compared: a drifted setup is an error,
+    never a pass. The message names the keys that differ."""
+    if len(new) and comparable(cmp) == 0:
+        diff = differing_keys(new, old)
+        raise ImpactvalError(f"nothing comparable with {baseline}: none of the {len(new)} rows has a baseline row "
+                             f"with the same scene, engine, settings and scene hash"
+                             + (f"; differing: {' | '.join(diff)}" if diff else "")
+                             + ". Rerun the baseline with these settings, or use the baseline's settings.")
+
+
+def wall_time_steps(history: pd.DataFrame, threshold: float = DEFAULT_WALL_THRESHOLD,
+                    window: int = WALL_WINDOW) -> pd.DataFrame:
+    """Speed regressions from the history of several nights (asv's idea: a step, not a noisy night).
+
+    `history`: rows of successive runs with KEY, `run_index` (0 = oldest) and `wall_time_step_s` [s].
+    For each key the ok rows are ordered by night; the last `window` nights are compared with the
+    median of the (up to 3 x window) nights before them. A row is "slower" when every one of the last
+    `window` nights is more than `threshold` (relative) above that median, "faster" when every one is
+    that much below, "steady" otherwise, and "not enough history" with fewer than 2 x window nights.
+    Returns one row per key: KEY, state, nights, before_s (median), after_s (median of the window),
+    ratio (after / before).
+    """
+    cols = [*KEY, "state", "nights", "before_s", "after_s", "ratio"]
+    if history is None or not len(history):
+        return pd.DataFrame(columns=cols)
+    h = history[history["status"].astype(str) == "ok"].copy()
+    h["_key"] = [row_key(r) for _, r in h.iterrows()]
+    h["_wall"] = pd.to_numeric(h["wall_time_step_s"], errors="coerce")
+    out = []
+    for key, g in h.groupby("_key", sort=False):
+        s = g.sort_values("run_index")["_wall"].dropna().to_numpy()
+        rec = dict(zip(KEY, key), nights=len(s), before_s=math.nan, after_s=math.nan, ratio=math.nan)
+        if len(s) < 2 * window:
+            rec["state"] = f"not enough history ({len(s)} of {2 * window} nights)"
+        else:
+            after = s[-window:]
+            before = s[:-window][-3 * window:]
+            med_b, med_a = float(pd.Series(before).median()), float(pd.Series(after).median())
+            rec.update(before_s=med_b, after_s=med_a, ratio=med_a / med_b if med_b > 0 else math.nan)
+            if med_b > 0 and (after > med_b * (1 + threshold)).all():
+                rec["state"] = "slower"
+            elif med_b > 0 and (after < med_b / (1 + threshold)).all():
+                rec["state"] = "faster"
+            else:
+                rec["state"] = "steady"
+        out.append(rec)
+    return pd.DataFrame(out, columns=cols)
+
+
+def markdown(cmp: pd.DataFrame, baseline: str | Path, threshold: float | dict[str, ThresholdCheck] | None = None) -> str:
+    """The report section: flagged rows first (with the numbers), then every compared row."""
+    from impactval.reports.run_report import comparison_section
+
+    return comparison_section(cmp, str(baseline), threshold)
+
+
+def flagged_lines(cmp: pd.DataFrame) -> list[str]:
+    """One console line per marked row: 'MARK scene / engine (settings): why'."""
+    order = {"!": 0, "+": 1, "*": 2, "-": 3, "x": 4}
+    lines = []
+    for _, r in cmp[cmp["mark"] != ""].sort_values("mark", key=lambda s: s.map(order), kind="stable").iterrows():
+        lines.append(f"  {r['mark']} {r['scene']} / {r['engine']} ({r['contact']}, dt={_fmt(_cell('dt', r['dt']))}"
+                     f"{', N=' + str(_cell('segments', r['segments'])) if _cell('segments', r['segments']) else ''}): "
+                     f"{r['why']}")
+    return lines
+
+
+def summary_counts(cmp: pd.DataFrame) -> dict[str, int]:
+    """How many rows got each mark, plus 'changed' (any metric differs, flagged or not)."""
+    out = {m: int((cmp["mark"] == m).sum()) if len(cmp) else 0 for m in ("!", "+", "*", "-", "x")}
+    out["changed"] = int(cmp["changed"].sum()) if len(cmp) else 0
+    return out
+
+
+def check_names(checks: dict[str, ThresholdCheck] | Sequence | None) -> str:
+    """'t_m:+20%, f_m:+20%, ...' for the report."""
+    if checks is None or isinstance(checks, (int, float)):
+        checks = thresholds((), DEFAULT_THRESHOLD if checks is None else checks)
+    return ", ".join(c.describe() for c in (checks.values() if isinstance(checks, dict) else checks))

@@ -544,30 +544,34 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         interrupted, rows = err, err.rows
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     df.attrs.update(store=db.url, n_reused=0)
-    report = markdown_report(df, settings)
-    if interrupted is not None:
-        report += (f"\n**Interrupted** ({signal.Signals(interrupted.signum).name}): {len(rows)} of "
-                   f"{interrupted.total} jobs finished; rerun the same command to run the rest.\n")
-    if len(variants) > 1 and len(df):
-        from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
-
-        report += speed_accuracy_table(df)
-        if out is not None:
-            png = speed_accuracy_plot(df, Path(out) / "speed_accuracy.png")
-            if png is not None:
-                report += f"\n![wall time vs error]({png.name})\n"
+    cmp = None
     if old is not None and len(df):
         from impactval import history
 
         cmp = history.compare(df, old, threshold)
         df.attrs["baseline"] = cmp
-        report += history.markdown(cmp, baseline, threshold)
+        df.attrs["baseline_rows"] = old
+    extra = ""
+    if interrupted is not None:
+        extra += (f"\n**Interrupted** ({signal.Signals(interrupted.signum).name}): {len(rows)} of "
+                  f"{interrupted.total} jobs finished; rerun the same command to run the rest.\n")
+    if len(variants) > 1 and len(df):
+        from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
+
+        extra += speed_accuracy_table(df)
+        if out is not None:
+            png = speed_accuracy_plot(df, Path(out) / "speed_accuracy.png")
+            if png is not None:
+                extra += f"\n![wall time vs error]({png.name})\n"
     notes: list[str] = []
     if out is not None:
+        from impactval.reports.build import write_report
         from impactval.store import export
 
         notes = export(db, out)
-        (Path(out) / "report.md").write_text(report)
+        # report.md + figures + report.html, from the store (presentation lives in reports/)
+        write_report(db, run_id, out, rows=df, cmp=cmp, baseline=None if baseline is None else f"`{baseline}`",
+                     checks=threshold, settings=settings, tol=tol, extra_md=extra)
     df.attrs["notes"] = notes
     info = db.run_info(run_id)
     df.attrs.update(run_id=info["id"], n_reused=info["n_reused"], status=info["status"])
@@ -584,75 +588,5 @@ def any_failed(df: pd.DataFrame) -> bool:
     return bool(df["status"].isin(FAILED_STATUSES).any())
 
 
-def _pct(x: Any) -> str:
-    x = _num(x)
-    return "" if not math.isfinite(x) else f"{100 * x:+.3f}"
-
-
-def _pct_abs(x: Any) -> str:
-    x = _num(x)
-    return "" if not math.isfinite(x) else f"{100 * x:.3f}"
-
-
-def _ms(x: Any) -> str:
-    x = _num(x)
-    return "" if not math.isfinite(x) else f"{1e3 * x:.1f}"
-
-
-def table_rows(df: pd.DataFrame) -> tuple[list[str], list[list[str]]]:
-    """Header and text cells of the summary table (errors in %, wall times in ms)."""
-    header = ["scene", "engine", "contact", "integrator", "dt [s]", "N", "status", "t_m %", "f_m %", "delta_m %",
-              "curve %", "lin t_m %", "lin f_m %", "lin delta_m %", "build ms", "step ms", "steps"]
-    cells = []
-    for _, r in df.iterrows():
-        seg = r["segments"]
-        dt = f"{r['dt']:g}" if isinstance(r["dt"], (int, float)) else str(r["dt"])
-        cells.append([str(r["scene"]), str(r["engine"]), str(r["contact"]), str(r["integrator"]), dt,
-                      "" if seg in ("", None) or (isinstance(seg, float) and math.isnan(seg)) else str(seg),
-                      str(r["status"]), _pct(r["err_t_m"]), _pct(r["err_f_m"]), _pct(r["err_delta_m"]),
-                      _pct_abs(r["err_curve"]), _pct(r["lin_err_t_m"]), _pct(r["lin_err_f_m"]),
-                      _pct(r["lin_err_delta_m"]), _ms(r["wall_time_build_s"]), _ms(r["wall_time_step_s"]),
-                      str(int(r["n_steps"])) if math.isfinite(_num(r["n_steps"])) else ""])
-    return header, cells
-
-
-def text_table(df: pd.DataFrame) -> str:
-    """The summary table as aligned plain text."""
-    header, cells = table_rows(df)
-    widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(header)]
-    lines = ["  ".join(h.rjust(w) if i > 6 else h.ljust(w) for i, (h, w) in enumerate(zip(header, widths)))]
-    for c in cells:
-        lines.append("  ".join(x.rjust(w) if i > 6 else x.ljust(w) for i, (x, w) in enumerate(zip(c, widths))))
-    return "\n".join(lines)
-
-
-def markdown_report(df: pd.DataFrame, settings: EngineSettings | None = None) -> str:
-    """report.md: the summary table in markdown, then the messages of rows that did not succeed."""
-    header, cells = table_rows(df)
-    out = ["# impactval run", ""]
-    if settings is not None:
-        steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
-                                                     reverse=True)) or f"{settings.dt}"
-        out += [f"Settings: dt = {steps} s, contact = {settings.contact}, integrator = "
-                f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
-                f"timeout = {settings.timeout_s:g} s.", ""]
-    out += ["Errors are signed relative differences (engine - reference) / reference in %; `curve` is the RMS of "
-            "f(t) - f_ref(t) over the first contact divided by the reference f_m; `lin` columns compare a native "
-            "(linear) contact with the linear-theory reference for the same spring.", ""]
-    out.append("| " + " | ".join(header) + " |")
-    out.append("|" + "|".join("---" if i < 7 else "---:" for i in range(len(header))) + "|")
-    for c in cells:
-        out.append("| " + " | ".join(x.replace("|", "\\|") for x in c) + " |")
-    bad = df[df["status"] != "ok"]
-    if len(bad):
-        out += ["", "## Rows without a result", ""]
-        for _, r in bad.iterrows():
-            out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {r['message']}")
-    freq = df[df["structure_frequencies"].astype(str).str.len() > 0]
-    if len(freq):
-        out += ["", "## Structure model frequencies [rad/s] (engine model vs continuum)", ""]
-        for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
-            s, c = json.loads(r["structure_frequencies"]), json.loads(r["continuum_frequencies"])
-            pairs = ", ".join(f"{a:.1f} ({100 * (a / b - 1):+.2f} %)" for a, b in zip(s[:3], c[:3]))
-            out.append(f"- {r['scene']} / {r['engine']} (N = {r['segments']}): {pairs}")
-    return "\n".join(out) + "\n"
+# presentation lives in reports/ (data flows one way); re-exported for existing callers
+from impactval.reports.run_report import markdown_report, table_rows, text_table  # noqa: E402,F401

@@ -102,6 +102,14 @@ def _url(where: str | Path | None) -> str:
         return "sqlite://"                                   # in memory: a run without --out
     text = str(where)
     if "://" in text:
+        scheme, rest = text.split("://", 1)
+        if scheme in ("postgresql", "postgres"):
+            # plain postgresql:// means psycopg2 to SQLAlchemy; the [postgres] extra installs psycopg 3
+            import importlib.util
+
+            if importlib.util.find_spec("psycopg2") is None and importlib.util.find_spec("psycopg") is not None:
+                return f"postgresql+psycopg://{rest}"
+            return f"postgresql://{rest}"
         return text
     p = Path(text).expanduser().resolve()
     if p.is_dir():
@@ -398,6 +406,9 @@ def _atomic_write(path: Path, write) -> None:
     os.close(fd)
     try:
         write(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)   # mkstemp creates 0600; an export is as readable as any file
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

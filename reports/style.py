@@ -15,7 +15,7 @@ ENGINE_COLOURS: dict[str, str] = {
     "mujoco": "#0072B2",      # blue
     "pybullet": "#D55E00",    # vermillion
     "exudyn": "#009E73",      # bluish green
-    "warp": "#CC79A7",        # reddish purple
+    "mujoco-warp": "#CC79A7", # reddish purple
     "newton": "#E69F00",      # orange
 }
 #: colours for engines not in ENGINE_COLOURS

@@ -84,3 +84,66 @@ def test_bad_threshold_fails_before_any_job(tmp_path):
                           "--out", str(tmp_path)], capture_output=True, text=True)
     assert out.returncode == 2 and "threshold must be a positive fraction" in out.stderr
     assert not (tmp_path / "results.csv").exists()
+
+
+# ---------------------------------------------------------------------------- issue 16: thresholds, keys, wall-time steps
+from impactval.history import (differing_keys, parse_fail_on, require_comparable, thresholds,  # noqa: E402
+                               wall_time_steps)
+
+
+def test_parse_fail_on():
+    c = parse_fail_on("f_m:+20%")
+    assert (c.metric, c.rel, c.abs_pp) == ("f_m", 0.2, None)
+    c = parse_fail_on("curve:+0.5pp")
+    assert (c.metric, c.rel, c.abs_pp) == ("curve", None, 0.5)
+    for bad, msg in (("f_m", "METRIC:\\+N%"), ("fm:+20%", "unknown metric 'fm'"), ("f_m:+0%", "positive"),
+                     ("wall_time:+2pp", "relative step")):
+        with pytest.raises(ImpactvalError, match=msg):
+            parse_fail_on(bad)
+
+
+def test_per_metric_thresholds():
+    old, new = [row(err=1e-3)], [row(err=1.3e-3)]                  # t_m and f_m |error| +30 %
+    assert marks(old, new) == ["+"]
+    loose = thresholds(["t_m:+50%", "f_m:+50%"])
+    assert list(compare(pd.DataFrame(new), pd.DataFrame(old), loose)["mark"]) == [""]
+    # absolute: 0.03 percentage points of growth; the t_m error grew by 0.03 pp exactly -> not past
+    pp = thresholds(["t_m:+0.02pp", "f_m:+1pp"])
+    cmp = compare(pd.DataFrame(new), pd.DataFrame(old), pp)
+    assert list(cmp["mark"]) == ["+"] and "t_m +0.1 % -> +0.13 %" in cmp["why"][0] and "f_m" not in cmp["why"][0]
+
+
+def test_reason_names_the_numbers_and_the_engine_version():
+    cmp = compare(pd.DataFrame([row(err=2e-3, version="3.3")]), pd.DataFrame([row(err=1e-3, version="3.2")]))
+    why = cmp["why"][0]
+    assert cmp["mark"][0] == "+" and "t_m +0.1 % -> +0.2 % (+100 % in size)" in why
+    assert "engine version 3.2 -> 3.3" in why
+
+
+def test_nothing_comparable_names_the_keys_that_differ():
+    old = pd.DataFrame([row(segments="81"), row(scene="b", segments="81")])
+    new = pd.DataFrame([row(segments="40"), row(scene="b", segments="40")])
+    cmp = compare(new, old)
+    assert list(cmp["mark"]) == ["x", "x"]
+    assert differing_keys(new, old) == ["segments: baseline 81; now 40"]
+    with pytest.raises(ImpactvalError, match="nothing comparable with base.csv.*segments: baseline 81; now 40"):
+        require_comparable(cmp, new, old, "base.csv")
+    require_comparable(compare(old, old), old, old, "base.csv")      # comparable: no error
+
+
+def _hist(walls):
+    return pd.DataFrame([{**row(), "run_index": i, "wall_time_step_s": w} for i, w in enumerate(walls)])
+
+
+def test_wall_time_steps_need_a_persisting_step():
+    def state(walls):
+        return wall_time_steps(_hist(walls), threshold=0.5, window=3)["state"][0]
+
+    assert state([1.0] * 5) == "not enough history (5 of 6 nights)"
+    assert state([1.0, 1.1, 0.9, 1.0, 1.0, 1.05]) == "steady"
+    assert state([1.0, 1.1, 0.9, 1.0, 3.0, 1.05]) == "steady"          # one noisy night is not a step
+    assert state([1.0, 1.1, 0.9, 2.0, 2.1, 1.9]) == "slower"           # three nights past +50 %
+    assert state([1.0, 1.1, 0.9, 2.0, 2.1, 1.4]) == "steady"           # the last is within +50 %
+    assert state([1.0, 1.1, 0.9, 0.5, 0.5, 0.6]) == "faster"
+    r = wall_time_steps(_hist([1.0, 1.0, 1.0, 2.0, 2.0, 2.0]))
+    assert r["ratio"][0] == pytest.approx(2.0) and r["nights"][0] == 6

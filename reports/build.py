@@ -1,0 +1,144 @@
+"""Assemble a run's report from the result store: report.md, figures, report.html (issue 16).
+
+`write_report(store, run_id, out)` is what `impactval run`, `impactval nightly` and `impactval report`
+share: it reads the run's rows and facts from the store, solves each scene's reference again (the
+same solver and tolerance give the same curve; a scene whose hash changed since is said so and not
+drawn), draws the force curves (reference, each engine from its stored series, the linear-theory
+curve where a linear contact was used), adds the trend plots and comparison given by the caller,
+and writes the markdown and the self-contained HTML page side by side.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from impactval.errors import ImpactvalError
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name))
+
+
+def _label(r, several: bool) -> str:
+    if not several:
+        return str(r["engine"])
+    seg = str(r["segments"])
+    seg = seg[:-2] if seg.endswith(".0") else seg
+    from impactval.reports.run_report import _dt
+
+    return f"{r['engine']} {r['contact']} dt={_dt(r['dt'])}" + (f" N={seg}" if seg not in ("", "nan") else "")
+
+
+def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True
+                  ) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
+    """Force-curve figures (caption, file name), the reference table (reports.provenance records)
+    and notes, for every scene of `rows`."""
+    import impactval
+    from impactval.reports.plots import finite_series, force_curves_plot, thin
+    from impactval.reports.provenance import reference_record
+    from impactval.runner import scene_hash
+
+    figures, refs, notes = [], [], []
+    for name in dict.fromkeys(rows["scene"]):
+        g = rows[rows["scene"] == name]
+        try:
+            scene = impactval.load_scene(name)
+        except ImpactvalError:
+            notes.append(f"{name}: not in the catalogue here; no reference curve or provenance")
+            continue
+        if str(g["scene_hash"].iloc[0]) != scene_hash(scene):
+            notes.append(f"{name}: the scene or reference changed since this run (scene hash "
+                         f"{g['scene_hash'].iloc[0]} -> {scene_hash(scene)}); reference values and curve not redrawn")
+            continue
+        ref = impactval.solve(scene, tol=tol)
+        refs.append(reference_record(scene, ref))
+        if not plots:
+            continue
+        ok = g[g["status"].astype(str) == "ok"]
+        several = ok.duplicated(["engine"]).any()
+        curves, linear = {}, None
+        for _, r in ok.iterrows():
+            series = store.load_series(str(r["job_key"])) if str(r.get("job_key", "")) else None
+            s = finite_series(series["t"], series["f"]) if series else None
+            if s is not None:
+                curves[_label(r, several)] = thin(*s)
+            k = pd.to_numeric(pd.Series([r.get("contact_stiffness")]), errors="coerce").iloc[0]
+            law = str(r.get("contact_law", "") or "")
+            is_linear = law == "linear" or (not law and str(r["contact"]) == "native")   # older adapters: no law
+            if linear is None and is_linear and math.isfinite(k) and k > 0:
+                from impactval.reference.linear import solve_linear
+
+                lin = solve_linear(scene, tol=tol, stiffness=float(k))
+                linear = thin(lin.t, lin.f)
+        if not curves and len(ok):
+            notes.append(f"{name}: no engine series stored for this run (run with --keep-series to draw them)")
+        path = force_curves_plot(name, thin(ref.t, ref.f), curves, out / f"curves_{_safe(name)}.png", linear=linear)
+        if path is not None:
+            figures.append((f"{name}: contact force, engines against the reference"
+                            + (" and the linear theory (k0 of the engine's contact)" if linear is not None else ""),
+                            path.name))
+    return figures, pd.DataFrame(refs), notes
+
+
+def run_info(store, run_id: str, title: str) -> dict[str, Any]:
+    """Header facts of a run from the store."""
+    info = store.run_info(run_id)
+    versions = {"impactval": info.get("impactval_version", ""), "reference": info.get("reference_version", "")}
+    versions.update({k: v for k, v in (info.get("engines") or {}).items()})
+    return {"title": title, "run_id": run_id, "command": f"`{info.get('command', '')}`" if info.get("command") else "",
+            "started": info.get("started_at", ""), "finished": info.get("ended_at") or "not finished",
+            "ended": info.get("status", ""), "versions": versions,
+            "machine": f"{info.get('machine', '')}, Python {info.get('python', '')}"}
+
+
+def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval run", rows: pd.DataFrame | None = None,
+                 cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
+                 history: pd.DataFrame | None = None, trend: pd.DataFrame | None = None, settings=None,
+                 tol: float = 1e-6, extra_info: dict[str, Any] | None = None, extra_md: str = "",
+                 html: bool = True, plots: bool = True) -> tuple[Path, Path | None]:
+    """Write out/report.md (+ PNG figures) and out/report.html for run `run_id` of `store`.
+
+    `history`: rows of the last nights (run_index, night, mark, ...) for the trend plots; `trend`:
+    impactval.history.wall_time_steps; `cmp`, `baseline`, `checks`: the comparison. Returns the paths."""
+    import importlib.util
+
+    from impactval.reports.html import write_html
+    from impactval.reports.run_report import markdown_report
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = store.rows(run_id=run_id) if rows is None else rows
+    plots = plots and importlib.util.find_spec("matplotlib") is not None
+    figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots)
+    if plots and history is not None and len(history) and history["run_index"].nunique() > 1:
+        from impactval.history import row_key
+        from impactval.reports.plots import trend_plot
+
+        slow = set() if trend is None or not len(trend) else {
+            row_key(r) for _, r in trend[trend["state"] == "slower"].iterrows()}
+        last = history["run_index"].max()
+        history = history.assign(wall_mark=[bool(slow) and ri == last and row_key(r) in slow
+                                            for ri, (_, r) in zip(history["run_index"], history.iterrows())])
+
+        for name in dict.fromkeys(rows["scene"]):
+            p = trend_plot(history, name, out / f"trend_{_safe(name)}.png")
+            if p is not None:
+                figures.append((f"{name}: errors and stepping wall time over the last "
+                                f"{history['run_index'].nunique()} runs", p.name))
+    info = run_info(store, run_id, title)
+    info.update(extra_info or {})
+    md = markdown_report(rows, settings, info=info, cmp=cmp, baseline=baseline, checks=checks, trend=trend,
+                         references=refs, figures=sorted(figures, key=lambda f: f[1].startswith("trend_")))
+    if notes:
+        md += "\n## Notes\n\n" + "\n".join(f"- {n}" for n in notes) + "\n"
+    md += extra_md
+    if not plots:
+        md += "\n*Figures left out: matplotlib is not installed (pip install 'impactval[plots]').*\n"
+    report = out / "report.md"
+    report.write_text(md)
+    page = write_html(report) if html else None
+    return report, page

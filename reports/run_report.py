@@ -1,0 +1,345 @@
+"""The report of a run (`impactval run`, `impactval nightly`, `impactval report`): markdown first.
+
+Order follows what a reader needs in a minute: a header (what ran where, how it ended), a summary
+per engine (worst error, status counts, regressions), the comparison marks, figures (force curves,
+trends), then the full table (empty columns dropped), the reference values with their provenance,
+and the messages of rows without a result. `reports.html.render_html` turns the same markdown into
+one self-contained HTML page, so both always say the same thing.
+"""
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, Iterable, Mapping
+
+import pandas as pd
+
+from impactval.reports.style import MARKS
+
+
+def _num(x: Any) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _pct(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{100 * x:+.3f}"
+
+
+def _pct_abs(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{100 * x:.3f}"
+
+
+def _ms(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else f"{1e3 * x:.1f}"
+
+
+def _int(x: Any) -> str:
+    x = _num(x)
+    return "" if not math.isfinite(x) else str(int(x))
+
+
+def _seg(x: Any) -> str:
+    if x in ("", None) or (isinstance(x, float) and math.isnan(x)):
+        return ""
+    s = str(x)
+    return s[:-2] if s.endswith(".0") else s
+
+
+def _dt(x: Any) -> str:
+    """A time step [s] as text ("auto" and other words stay as they are)."""
+    v = _num(x)
+    return f"{v:g}" if math.isfinite(v) else ("" if x is None or (isinstance(x, float)) else str(x))
+
+
+def _col(r, key: str) -> Any:
+    return r[key] if key in r else math.nan
+
+
+#: (header, cell function, right-aligned) of the results table, in order
+_COLUMNS = (
+    ("scene", lambda r: str(r["scene"]), False),
+    ("engine", lambda r: str(r["engine"]), False),
+    ("contact", lambda r: str(r["contact"]), False),
+    ("integrator", lambda r: "" if pd.isna(r["integrator"]) else str(r["integrator"]), False),
+    ("dt [s]", lambda r: _dt(r["dt"]), False),
+    ("N", lambda r: _seg(r["segments"]), False),
+    ("status", lambda r: str(r["status"]), False),
+    ("contacts", lambda r: _int(_col(r, "n_contacts")) if str(r["status"]) == "ok" else "", True),
+    ("t_m %", lambda r: _pct(r["err_t_m"]), True),
+    ("f_m %", lambda r: _pct(r["err_f_m"]), True),
+    ("delta_m %", lambda r: _pct(r["err_delta_m"]), True),
+    ("curve %", lambda r: _pct_abs(_col(r, "err_curve")), True),
+    ("lin t_m %", lambda r: _pct(_col(r, "lin_err_t_m")), True),
+    ("lin f_m %", lambda r: _pct(_col(r, "lin_err_f_m")), True),
+    ("lin delta_m %", lambda r: _pct(_col(r, "lin_err_delta_m")), True),
+    ("build ms", lambda r: _ms(_col(r, "wall_time_build_s")), True),
+    ("step ms", lambda r: _ms(_col(r, "wall_time_step_s")), True),
+    ("steps", lambda r: _int(_col(r, "n_steps")), True),
+)
+
+
+def table_rows(df: pd.DataFrame, marks: Mapping[tuple, str] | None = None,
+               keep_empty: bool = False) -> tuple[list[str], list[list[str]], list[bool]]:
+    """Header, text cells and right-alignment of the results table (errors in %, wall times in ms).
+    Columns that are empty in every row are dropped (unless `keep_empty`); `marks` (row key ->
+    mark, see impactval.history.row_key) adds a first column "mark"."""
+    cols = list(_COLUMNS)
+    cells = [[fn(r) for _, fn, _ in cols] for _, r in df.iterrows()]
+    keep = [keep_empty or not cells or any(c[i] for c in cells) or i < 2 for i in range(len(cols))]
+    header = [h for (h, _, _), k in zip(cols, keep) if k]
+    right = [a for (_, _, a), k in zip(cols, keep) if k]
+    cells = [[x for x, k in zip(c, keep) if k] for c in cells]
+    if marks is not None:
+        from impactval.history import row_key
+
+        keys = [row_key(r) for _, r in df.iterrows()]
+        header, right = ["mark", *header], [False, *right]
+        cells = [[marks.get(k, ""), *c] for k, c in zip(keys, cells)]
+    return header, cells, right
+
+
+def text_table(df: pd.DataFrame) -> str:
+    """The results table as aligned plain text (empty columns dropped)."""
+    header, cells, right = table_rows(df)
+    widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(header)]
+
+    def line(items):
+        return "  ".join(x.rjust(w) if r else x.ljust(w) for x, w, r in zip(items, widths, right)).rstrip()
+
+    return "\n".join([line(header), *(line(c) for c in cells)])
+
+
+def _md_table(header: list[str], cells: Iterable[list[str]], right: list[bool] | None = None) -> list[str]:
+    right = right or [False] * len(header)
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---:" if r else "---" for r in right) + "|"]
+    for c in cells:
+        out.append("| " + " | ".join(str(x).replace("|", "\\|") for x in c) + " |")
+    return out
+
+
+def _score(r) -> tuple[float, str]:
+    best, name = math.nan, ""
+    for m in ("t_m", "f_m", "delta_m"):
+        v = abs(_num(r[f"err_{m}"]))
+        if math.isfinite(v) and not (v <= best):
+            best, name = v, m
+    return best, name
+
+
+def summary_section(df: pd.DataFrame, cmp: pd.DataFrame | None = None, trend: pd.DataFrame | None = None) -> list[str]:
+    """Per engine: jobs, status counts, worst |error| (metric, scene, value in %), regressions."""
+    from impactval.reference.result import FAILED
+
+    failed = {str(s) for s in FAILED}
+    out = ["## Summary", ""]
+    header = ["engine", "version", "jobs", "ok", "failed", "other", "worst error", "where"]
+    if cmp is not None:
+        header += ["regressions", "fixed/better"]
+    if trend is not None and len(trend):
+        header += ["slower"]
+    cells = []
+    for engine, g in df.groupby("engine", sort=False):
+        st = g["status"].astype(str)
+        worst, where = math.nan, ""
+        for _, r in g[st == "ok"].iterrows():
+            s, m = _score(r)
+            if math.isfinite(s) and not (s <= worst):
+                worst, where = s, f"{m}, {r['scene']}"
+        others = st[(st != "ok") & ~st.isin(failed)]
+        other = ", ".join(f"{n} {k}" for k, n in others.value_counts().items())
+        bad = st[st.isin(failed)]
+        failed_txt = ", ".join(f"{n} {k}" for k, n in bad.value_counts().items()) or "0"
+        versions = ", ".join(sorted({str(v) for v in g.get("version", pd.Series(dtype=str)).dropna() if str(v)}))
+        row = [str(engine), versions, str(len(g)), str(int((st == "ok").sum())), failed_txt, other or "0",
+               "" if not math.isfinite(worst) else f"{100 * worst:.3f} %", where]
+        if cmp is not None:
+            c = cmp[cmp["engine"] == engine]
+            reg = c[c["mark"].isin(["+", "!"])]
+            row.append("; ".join(f"{r['mark']} {r['scene']}: {_short_why(r)}" for _, r in reg.iterrows()) or "none")
+            good = c[c["mark"].isin(["*", "-"])]
+            row.append(str(len(good)))
+        if trend is not None and len(trend):
+            t = trend[(trend["engine"] == engine) & (trend["state"] == "slower")]
+            row.append(", ".join(f"{r['scene']} x{r['ratio']:.2f}" for _, r in t.iterrows()) or "none")
+        cells.append(row)
+    out += _md_table(header, cells)
+    out += ["", "Errors are signed relative differences (engine - reference) / reference in %; the worst error "
+            "is the largest |error| of t_m, f_m, delta_m over the engine's rows. Failed: crashed, timeout, "
+            "unstable, no-contact (exit 1); other: not-installed, skipped, interrupted (informative).", ""]
+    return out
+
+
+def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.DataFrame | None = None) -> str:
+    """The comparison with the baseline: thresholds, counts, flagged rows with numbers, then every row."""
+    from impactval.history import check_names, summary_counts
+
+    counts = summary_counts(cmp)
+    out = ["", "## Against the baseline", "",
+           f"Baseline: {baseline}. Thresholds (growth of |error| that flags a row): {check_names(checks)}. "
+           f"Rows are compared only with the same scene, engine, contact, integrator, dt and N and the same scene "
+           f"hash (scene + reference version); the engine version is a separate axis and named where it changed.",
+           "",
+           "Marks: " + "; ".join(f"`{m}` {text}" for m, text in MARKS.items()) + ".", "",
+           f"Counts: {counts['!']} newly failing, {counts['+']} worse, {counts['*']} fixed, {counts['-']} better, "
+           f"{counts['x']} not comparable, {counts['changed']} of {len(cmp)} rows changed at all.", ""]
+    flagged = cmp[cmp["mark"] != ""]
+    order = {"!": 0, "+": 1, "*": 2, "-": 3, "x": 4}
+    if len(flagged):
+        for _, r in flagged.sort_values("mark", key=lambda s: s.map(order), kind="stable").iterrows():
+            out.append(f"- `{r['mark']}` {r['scene']} / {r['engine']} ({r['contact']}, dt = {_dt(r['dt'])} s"
+                       f"{', N = ' + _seg(r['segments']) if _seg(r['segments']) else ''}): {r['why']}")
+        out.append("")
+    header = ["mark", "scene", "engine", "contact", "dt [s]", "N", "version", "baseline %", "now %", "change"]
+    cells = []
+    for _, r in cmp.sort_values("mark", key=lambda s: s.map(lambda m: order.get(m, 5)), kind="stable").iterrows():
+        ch = _num(r["change"])
+        version = r["version"] if r["old_version"] == r["version"] else f"{r['old_version']} -> {r['version']}"
+        cells.append([r["mark"], r["scene"], r["engine"], r["contact"], _dt(r["dt"]), _seg(r["segments"]),
+                      version, _pct_abs(r["old_score"]), _pct_abs(r["score"]),
+                      "" if not math.isfinite(ch) else f"{100 * ch:+.1f} %"])
+    out += ["Largest |error| of t_m, f_m, delta_m per row, in %:", ""]
+    out += _md_table(header, cells, [False] * 4 + [True, True, False, True, True, True])
+    if trend is not None and len(trend) and trend["state"].astype(str).str.startswith("not enough history").all():
+        out += ["", "### Stepping wall time over the history", "",
+                f"Not enough history yet: wall-time steps are judged from {2 * _window()} nights on "
+                f"(now at most {int(pd.to_numeric(trend['nights']).max())})."]
+    elif trend is not None and len(trend):
+        out += ["", "### Stepping wall time over the history", "",
+                "Wall times are noisy: a row is flagged only when each of the last nights is past the threshold "
+                "against the median of the nights before (a step that persists).", ""]
+        tcells = [[r["scene"], r["engine"], r["contact"], _dt(r["dt"]), _seg(r["segments"]), r["state"],
+                   str(r["nights"]), _ms(r["before_s"]), _ms(r["after_s"]),
+                   "" if not math.isfinite(_num(r["ratio"])) else f"{_num(r['ratio']):.2f}"]
+                  for _, r in trend.iterrows()]
+        out += _md_table(["scene", "engine", "contact", "dt [s]", "N", "state", "nights", "before ms", "last ms",
+                          "ratio"], tcells, [False] * 6 + [True] * 4)
+    return "\n".join(out) + "\n"
+
+
+def _window() -> int:
+    from impactval.history import WALL_WINDOW
+
+    return WALL_WINDOW
+
+
+def _short_why(r) -> str:
+    """The regressed row's worst metric with its numbers (the full reason is in the comparison)."""
+    if r["mark"] != "+":
+        return str(r["why"])
+    parts = [p.strip() for p in str(r["why"]).split(";")]
+    changes = [(abs(_num(r.get(f"change_{p.split()[0]}"))), p) for p in parts if p.split() and
+               math.isfinite(_num(r.get(f"change_{p.split()[0]}")))]
+    return max(changes)[1] if changes else str(r["why"])
+
+
+def reference_section(references: pd.DataFrame) -> list[str]:
+    """Reference values per scene with their provenance (closed form / Volterra solver with its
+    uncertainty / literature), as code_aster tags its reference values."""
+    out = ["## Reference values", "",
+           "What every error above is measured against. Provenance: *closed form* (exact formula), *Volterra "
+           "solver* (impactval's Hertz/modal solver; ± is its checked uncertainty bound), *literature* (published "
+           "value).", ""]
+    cells = []
+    for _, r in references.iterrows():
+        def pm(v, u, k, digits):
+            v, u = _num(v), _num(u)
+            if not math.isfinite(v):
+                return ""
+            return f"{v * k:.{digits}g}" + (f" ± {u * k:.1g}" if math.isfinite(u) and u > 0 else "")
+
+        cells.append([r["scene"], pm(r["t_m"], r.get("u_t_m"), 1e6, 9), pm(r["f_m"], r.get("u_f_m"), 1, 9),
+                      pm(r["delta_m"], r.get("u_delta_m"), 1e6, 9), _int(r.get("n_contacts")),
+                      _int(r.get("modes")), str(r.get("provenance", ""))])
+    out += _md_table(["scene", "t_m [us]", "f_m [N]", "delta_m [um]", "contacts", "modes", "provenance"], cells,
+                     [False, True, True, True, True, True, False])
+    return out + [""]
+
+
+def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFrame | None = None) -> list[str]:
+    """Title and one line per fact: run, date, how it ended, versions, machine, settings."""
+    info = dict(info or {})
+    out = [f"# {info.pop('title', 'impactval run')}", ""]
+    labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"),
+              ("finished", "finished"),
+              ("ended", "how it ended"), ("versions", "versions"), ("machine", "machine"), ("suite", "suite"))
+    for key, label in labels:
+        v = info.get(key)
+        if v in (None, "", {}):
+            continue
+        if isinstance(v, Mapping):
+            v = ", ".join(f"{k} {x}" for k, x in v.items())
+        out.append(f"- **{label}**: {v}")
+    if settings is not None:
+        steps = _dt(settings.dt)
+        if df is not None and len(df):
+            steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
+                                                        reverse=True)) or steps
+        out.append(f"- **settings**: dt = {steps} s, contact = {settings.contact}, integrator = "
+                   f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
+                   f"timeout = {settings.timeout_s:g} s")
+    return out + [""] if len(out) > 2 else out
+
+
+def markdown_report(df: pd.DataFrame, settings=None, *, info: Mapping[str, Any] | None = None,
+                    cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
+                    trend: pd.DataFrame | None = None, references: pd.DataFrame | None = None,
+                    figures: Iterable[tuple[str, str]] = ()) -> str:
+    """report.md of a run.
+
+    Parameters
+    ----------
+    df : the run's rows (impactval.runner.COLUMNS)
+    settings : EngineSettings of the run, optional (shown in the header)
+    info : header facts (run_id, command, started, finished, ended, versions, machine, suite), optional
+    cmp, baseline, checks : comparison with a baseline (impactval.history.compare), its name and thresholds
+    trend : wall-time steps over the history (impactval.history.wall_time_steps)
+    references : one row per scene: t_m [s], f_m [N], delta_m [m], u_* (absolute), n_contacts, modes, provenance
+    figures : (caption, relative path of a PNG) pairs, shown after the summary
+    """
+    out = header_section(info, settings, df)
+    out += summary_section(df, cmp, trend)
+    if cmp is not None:
+        out += comparison_section(cmp, baseline or "the baseline", checks, trend).splitlines()
+        out.append("")
+    figures = list(figures)
+    if figures:
+        out += ["## Figures", ""]
+        for caption, path in figures:
+            out += [f"![{caption}]({path})", "", f"*{caption}*", ""]
+    marks = None
+    if cmp is not None and len(cmp):
+        from impactval.history import row_key
+
+        marks = {row_key(r): r["mark"] for _, r in cmp.iterrows()}
+    header, cells, right = table_rows(df, marks)
+    out += ["## Results", "",
+            "Errors in % (engine - reference) / reference; `curve` is the RMS of f(t) - f_ref(t) over the first "
+            "contact divided by the reference f_m; `lin` columns compare a native (linear) contact with the "
+            "linear-theory reference for the same spring; `contacts` counts contact phases in the simulated "
+            "window; wall times in ms. Columns empty in every row are left out.", ""]
+    out += _md_table(header, cells, right)
+    out.append("")
+    if references is not None and len(references):
+        out += reference_section(references)
+    bad = df[df["status"].astype(str) != "ok"]
+    if len(bad):
+        out += ["## Rows without a result", ""]
+        for _, r in bad.iterrows():
+            out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {' '.join(str(r['message']).split())}")
+        out.append("")
+    if "structure_frequencies" in df:
+        freq = df[df["structure_frequencies"].fillna("").astype(str).str.len() > 0]
+        if len(freq):
+            out += ["## Structure model frequencies [rad/s] (engine model vs continuum)", ""]
+            for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
+                s, c = json.loads(r["structure_frequencies"]), json.loads(r["continuum_frequencies"])
+                pairs = ", ".join(f"{a:.1f} ({100 * (a / b - 1):+.2f} %)" for a, b in zip(s[:3], c[:3]))
+                out.append(f"- {r['scene']} / {r['engine']} (N = {_seg(r['segments'])}): {pairs}")
+            out.append("")
+    return "\n".join(out).rstrip() + "\n"
