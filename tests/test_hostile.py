@@ -28,6 +28,12 @@ CI = settings(max_examples=60, deadline=10_000, suppress_health_check=[HealthChe
               derandomize=True)
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _compiled_kernel():
+    """Compile (or load) the solver kernel before the deadlines start: a cold numba cache takes ~20 s."""
+    impactval.solve("modal_two_mode", tol=1e-3)
+
+
 def log_uniform(low: float, high: float):
     return st.floats(math.log10(low), math.log10(high)).map(lambda e: min(high, max(low, 10.0 ** e)))
 
