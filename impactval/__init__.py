@@ -6,19 +6,39 @@ __all__ = ["load_scene", "solve", "structure_modes", "ImpactvalError", "SceneErr
 
 
 def load_scene(name_or_path):
-    """Load a scene: a catalogue name (see ``impactval scenes``) or a path to a TOML file."""
+    """Load a scene: a catalogue name (see ``impactval scenes``) or a path to a TOML file.
+
+    A Scene is returned as it is after checking its fields; anything else raises SceneError.
+    """
     from impactval.scenarios.scene import load_scene as _load
 
     return _load(name_or_path)
 
 
+_SOLVE_OPTIONS = ("window", "modes", "static_correction")
+
+
 def solve(scene, tol: float = 1e-6, **kwargs):
     """Reference solution of `scene` (Hertz contact + modal structure) to relative tolerance `tol`.
 
-    See :func:`impactval.reference.solve.solve` for the options.
+    `scene` is a Scene, a catalogue name or a path to a TOML file. Options: `window` [s] (time
+    followed after the first contact), `modes` (beam mode count), `static_correction` (bool); see
+    :func:`impactval.reference.solve.solve`. Bad arguments raise ImpactvalError naming the argument.
     """
+    from impactval import checks
     from impactval.reference.solve import solve as _solve
 
+    unknown = sorted(set(kwargs) - set(_SOLVE_OPTIONS))
+    if unknown:
+        raise ImpactvalError(f"solve() has no option {unknown[0]!r}; options: tol, {', '.join(_SOLVE_OPTIONS)}.")
+    opts = dict(kwargs)
+    if "window" in opts:
+        opts["window"] = checks.check_window(opts["window"])
+    if "modes" in opts:
+        opts["modes"] = checks.check_modes(opts["modes"])
+    if "static_correction" in opts:
+        opts["static_correction"] = checks.check_flag(opts["static_correction"], "static_correction")
+    tol, scene, kwargs = checks.check_tol(tol), load_scene(scene), opts
     return _solve(scene, tol=tol, **kwargs)
 
 

@@ -6,12 +6,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 import click
 
 from impactval.errors import ImpactvalError
+from impactval.checks import (MAX_ENGINE_MODES, MAX_SEGMENTS, check_answer, check_engine_steps, check_run_number,
+                              check_tol)
+from impactval.checks import check_window as check_window_arg
+from impactval.paths import check_output_dir, check_output_file, write_guard
 
 
 def _pm(value: float, unc: float) -> str:
@@ -44,6 +49,22 @@ class _Group(click.Group):
         except ImpactvalError as err:
             click.echo(f"impactval: error: {err}", err=True)
             ctx.exit(2)
+        except (MemoryError, RecursionError) as err:
+            click.echo(f"impactval: error: the request needs more {'memory' if isinstance(err, MemoryError) else 'nesting'}"
+                       f" than this machine has ({type(err).__name__}); make it smaller (fewer modes, a shorter window).",
+                       err=True)
+            ctx.exit(2)
+        except BrokenPipeError:       # the reader went away (`impactval scenes | head -1`): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            ctx.exit(0)
+        except click.exceptions.ClickException:
+            raise
+        except Exception as err:  # noqa: BLE001 - a bug: one line, the traceback on request (issue 18)
+            if os.environ.get("IMPACTVAL_DEBUG"):
+                raise
+            click.echo(f"impactval: internal error: {type(err).__name__}: {err} (a bug in impactval; please report it "
+                       f"with the command line; IMPACTVAL_DEBUG=1 shows the traceback)", err=True)
+            ctx.exit(3)
 
 
 @click.group(cls=_Group)
@@ -62,6 +83,9 @@ def scenes(tag: str | None) -> None:
     """List the built-in scene catalogue."""
     from impactval.scenarios.scene import load_catalogue
 
+    if tag is not None and not load_catalogue(tag):
+        known = sorted({t for s in load_catalogue() for t in s.tags})
+        raise ImpactvalError(f"--tag {tag!r} matches no scene; known tags: {', '.join(known)}.")
     for s in load_catalogue(tag):
         click.echo(f"{s.name:26s} {s.target.kind:12s} [{', '.join(s.tags)}]  {s.description}")
 
@@ -72,7 +96,7 @@ def scenes(tag: str | None) -> None:
 @click.option("--window", default=0.0, show_default=True, type=float,
               help="Time [s] to follow after the first contact ends (re-contacts).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per scene (SI units).")
-@click.option("--curve", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--curve", type=str, default=None,
               help="Write the time series (t, delta, f, x_ball, x_structure, energy) to this CSV file.")
 @click.option("--model", type=click.Choice(["nonlinear", "linear", "perturbation"]), default="nonlinear",
               show_default=True, help="Hertz contact (exact), linear contact k0 (exact) or first-order perturbation.")
@@ -85,8 +109,12 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
-    if curve and len(names) != 1:
+    if curve is not None and len(names) != 1:
         raise ImpactvalError("--curve writes one scene's series: give exactly one SCENE.")
+    if curve is not None:
+        check_output_file(curve, "--curve")
+    check_tol(tol)
+    check_window_arg(window)
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
@@ -105,6 +133,9 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     for sc in scenes_:
         r = impactval.solve(sc, tol=tol, window=window)
         u = r.uncertainty
+        check_answer(sc.name, t_m=r.t_m, f_m=r.f_m, delta_m=r.delta_m, uncertainty_t_m=u.t_m,
+                     uncertainty_f_m=u.f_m, uncertainty_delta_m=u.delta_m, rebound_velocity=r.rebound_velocity,
+                     energy_error=r.energy_error)
         if as_json:
             click.echo(json.dumps({"scene": r.scene, "t_m": r.t_m, "f_m": r.f_m, "delta_m": r.delta_m,
                                    "uncertainty": u.as_dict(), "modes": r.modes,
@@ -119,8 +150,10 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
             import numpy as np
 
             data = np.column_stack([r.t, r.delta, r.f, r.x_ball, r.x_structure, r.energy])
-            np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
-                       comments="")
+            with write_guard("--curve", curve):
+                Path(curve).parent.mkdir(parents=True, exist_ok=True)
+                np.savetxt(curve, data, delimiter=",", header="t_s,delta_m,f_N,x_ball_m,x_structure_m,energy_J",
+                           comments="")
         if explain and not as_json:
             _explain(sc, tol)
 
@@ -184,6 +217,8 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
             if curve and not math.isfinite(m.t_m):
                 raise ImpactvalError(f"--curve: {sc.name} has no first-order answer ({validity[0]}).")
             series = perturbation_curve(sc, "hertz") if curve else None
+        if model == "linear":           # (first-order answers that do not exist are shown as n/a)
+            check_answer(sc.name, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m)
         if as_json:
             finite = (lambda x: x if math.isfinite(x) else None)
             click.echo(json.dumps({"scene": sc.name, "model": label, "t_m": finite(m.t_m), "f_m": finite(m.f_m),
@@ -196,14 +231,16 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
             for warning in validity:
                 click.echo(f"  ! {warning}")
         if curve:
-            np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
+            with write_guard("--curve", curve):
+                Path(curve).parent.mkdir(parents=True, exist_ok=True)
+                np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
         if explain and not as_json:
             _explain(sc, tol)
 
 
 @main.command()
 @click.argument("scene", nargs=-1)
-@click.option("--out", "out_dir", default="theory-report", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out_dir", default="theory-report", show_default=True, type=str,
               help="Directory for the markdown pages and PNG plots.")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Relative tolerance of the exact solvers.")
 @click.option("--no-plot", is_flag=True, help="Skip the PNG plots (no matplotlib needed).")
@@ -215,6 +252,8 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
+    check_output_dir(out_dir, "--out")
+    check_tol(tol)
     scenes_ = [impactval.load_scene(n) for n in names]
     plot = not no_plot
     if plot:
@@ -227,12 +266,15 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     _warn_if_compiling()
     comparisons = []
     for sc in scenes_:
-        page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
+        with write_guard("--out", out_dir):
+            page, cmp = theory_page(sc, out_dir, tol=tol, plot=plot)
         comparisons.append(cmp)
         e = cmp.model_form_error
+        check_answer(sc.name, model_form_error_t_m=e.t_m, model_form_error_f_m=e.f_m, model_form_error_delta_m=e.delta_m)
         click.echo(f"{sc.name:24s} linear-contact model-form error: t_m {100 * e.t_m:+8.3f} %  "
                    f"f_m {100 * e.f_m:+8.3f} %  delta_m {100 * e.delta_m:+8.3f} %   -> {page}")
-    click.echo(f"index: {theory_index(comparisons, out_dir)}")
+    with write_guard("--out", out_dir):
+        click.echo(f"index: {theory_index(comparisons, out_dir)}")
 
 
 # ---------------------------------------------------------------------------- impactval run
@@ -270,7 +312,7 @@ def _parse_dts(text: str) -> list:
         raise ImpactvalError(f"--dt takes time steps in s, comma-separated (e.g. 1e-6,5e-7), got {text!r}.") from None
     if not dts:
         raise ImpactvalError("--dt: give at least one time step in s.")
-    return dts
+    return [check_run_number("--dt", x) for x in dts]
 
 
 def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, options=()):
@@ -291,8 +333,10 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
               help="hertz: exact law injected; native: engine contact as the linear spring k0; "
                    "native-hertz: engine contact shaped toward Hertz.")
 @click.option("--integrator", default=None, help="Engine integrator (e.g. MuJoCo: Euler, implicitfast, RK4).")
-@click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
-@click.option("--modes", default=None, type=click.IntRange(min=1), help="Modes of a modal (FFRF) beam (default: engine's).")
+@click.option("--segments", default=None, type=click.IntRange(1, MAX_SEGMENTS),
+              help=f"Beam chain segments, 1..{MAX_SEGMENTS} (default: engine's).")
+@click.option("--modes", default=None, type=click.IntRange(1, MAX_ENGINE_MODES),
+              help=f"Modes of a modal (FFRF) beam, 1..{MAX_ENGINE_MODES} (default: engine's).")
 @click.option("--option", "options", multiple=True, metavar="[ENGINE.]KEY=VALUE",
               help="Engine-specific option, repeatable; ENGINE. limits it to one engine "
                    "(e.g. exudyn.beam_model=reference-modes, pybullet.native_route=per-body).")
@@ -301,7 +345,7 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
               help="Simulated time [s] after the first contact ends (re-contacts).")
 @click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
 @click.option("--tag", default=None, help="Also run the catalogue scenes carrying this tag (see `impactval scenes`).")
-@click.option("--out", "out", default="impactval-results", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out", "out", default="impactval-results", show_default=True, type=str,
               help="Directory for the exports (results.csv, frequencies.csv, results.parquet) and report.md.")
 @click.option("--store", "store", default=None, metavar="PATH|URL",
               help="Result store: an SQLite file or a database URL (postgresql://...)  [default: OUT/impactval.sqlite]")
@@ -333,8 +377,19 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
 
     specs = [resolve_engine(e.strip()) for e in engines.split(",") if e.strip()]
     dts = _parse_dts(dt)
+    check_output_dir(out, "--out")
+    if store is not None and "://" not in store:
+        check_output_file(store, "--store")
+    check_tol(tol)
+    check_run_number("--timeout", timeout)
+    check_run_number("--tail", tail)
     settings = _run_settings(dts[0], contact, integrator, segments, timeout, tail, modes, options)
     names = list(scene) or ([] if tag else catalogue_names())
+    import impactval
+    from impactval.scenarios.scene import load_catalogue
+
+    check_engine_steps([impactval.load_scene(n) for n in names] + (load_catalogue(tag) if tag else []), dts,
+                       float(tail))
     _warn_if_compiling()
     import shlex
 

@@ -211,7 +211,7 @@ def _contact_stiffness(res: ImpactResult) -> float:
 def _as_scene(s):
     import impactval
 
-    return s if hasattr(s, "target") and hasattr(s, "ball") else impactval.load_scene(s)
+    return impactval.load_scene(s)      # names and paths are loaded, Scene objects checked (issue 18)
 
 
 def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:

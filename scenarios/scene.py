@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from impactval.errors import SceneError
+from impactval.scenarios import limits
 from impactval.scenarios.materials import BUILTIN_MATERIALS, Material
 
 SUPPORTS = ("simply-supported", "clamped-clamped", "cantilever")
@@ -210,9 +211,8 @@ def _where(src: str, section: str) -> str:
 
 
 def _positive(src: str, section: str, key: str, value: Any, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise SceneError(f"{_where(src, section)} {key} must be a positive finite number in {unit}, got {value!r}.")
-    return float(value)
+    """A positive finite number in its physically meaningful range (scenarios/limits.py)."""
+    return limits.check_number(src, section, key, value, unit)
 
 
 def _check_keys(src: str, section: str, table: Mapping[str, Any], required: set[str], optional: set[str]) -> None:
@@ -233,6 +233,7 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
     if not isinstance(extra, Mapping):
         raise SceneError(f"{src}: [materials] must be a table of [materials.NAME] tables.")
     for name, table in extra.items():
+        limits.check_name(src, "material name", name, "materials")
         sect = f"materials.{name}"
         _check_keys(src, sect, table, {"young", "poisson", "density"}, {"yield_stress"})
         nu = table["poisson"]
@@ -253,14 +254,7 @@ def _material(src: str, section: str, value: Any, mats: Mapping[str, Material]) 
 
 
 def _float_list(src: str, key: str, value: Any) -> tuple[float, ...]:
-    if not isinstance(value, list) or not value:
-        raise SceneError(f"{src}: [target] {key} must be a non-empty list of numbers, got {value!r}.")
-    out = []
-    for i, v in enumerate(value):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise SceneError(f"{src}: [target] {key}[{i}] must be a finite number, got {v!r}.")
-        out.append(float(v))
-    return tuple(out)
+    return limits.check_list(src, key, value)
 
 
 # ----------------------------------------------------------------------------- one parser per target kind
@@ -361,6 +355,7 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     """Build and validate a Scene from a parsed TOML document (a mapping)."""
     src = source
     _check_keys(src, "", doc, {"ball", "target"}, {"name", "description", "tags", "materials"})
+    limits.check_strings(src, doc, default_name)     # name, tags, description: the safe set (issue 18)
     mats = _materials(src, doc)
 
     b = doc["ball"]
@@ -370,6 +365,8 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     velocity = _positive(src, "ball", "velocity", b["velocity"], "m/s")
     mass = (_positive(src, "ball", "mass", b["mass"], "kg") if "mass" in b
             else bmat.density * 4.0 / 3.0 * math.pi * radius**3)
+    if "mass" not in b:
+        _positive(src, "ball", "mass", mass, "kg")        # density x volume must be in range too
     ball = Ball(radius, velocity, bmat, mass)
 
     t = doc["target"]
@@ -401,24 +398,47 @@ def catalogue_names() -> list[str]:
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
-    """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path."""
+    """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path.
+
+    A Scene is returned as it is, after checking its fields (Python-built scenes obey the same limits).
+    """
+    if hasattr(name_or_path, "ball") and hasattr(name_or_path, "target"):
+        limits.check_scene_fields(name_or_path)
+        return name_or_path
+    if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
+        raise SceneError(f"a scene is a Scene, a catalogue name (see `impactval scenes`) or a path to a .toml scene "
+                         f"file, got {name_or_path!r}.")
     text_name = str(name_or_path)
+    if "\x00" in text_name or len(text_name) > 4096:
+        raise SceneError(f"a scene is a catalogue name or a path to a .toml scene file, got "
+                         f"{text_name[:80]!r}{'...' if len(text_name) > 80 else ''} (a NUL character or too long).")
     path = Path(text_name)
-    if not (text_name.endswith(".toml") or path.exists()):
-        cand = CATALOGUE_DIR / f"{text_name}.toml"
-        if not cand.exists():
-            raise SceneError(f"no scene named {text_name!r}: not a file and not in the catalogue "
-                             f"(known: {', '.join(catalogue_names())}).")
-        path = cand
-    if not path.is_file():
-        raise SceneError(f"{path}: file does not exist (give a catalogue name or a path to a .toml scene file).")
     try:
-        doc = tomllib.loads(path.read_text())
+        if not (text_name.endswith(".toml") or path.exists()):
+            cand = CATALOGUE_DIR / f"{text_name}.toml"
+            if not limits.NAME_RE.fullmatch(text_name) or not cand.exists():
+                raise SceneError(f"no scene named {text_name[:80]!r}: not a file and not in the catalogue "
+                                 f"(known: {', '.join(catalogue_names())}).")
+            path = cand
+        if not path.is_file():
+            what = ("is a directory" if path.is_dir() else "is not a regular file" if path.exists()
+                    else "file does not exist")
+            raise SceneError(f"{path}: {what} (give a catalogue name or a path to a .toml scene file).")
+        text = path.read_text(encoding="utf-8-sig")      # a byte-order mark (Windows editors) is dropped
+        doc = tomllib.loads(text)
+    except SceneError:
+        raise
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{path}: malformed TOML: {err}.") from None
+    except ValueError as err:       # e.g. an integer literal of more than 4300 digits
+        raise SceneError(f"{path}: malformed TOML: {str(err)[:120]}.") from None
+    except RecursionError:
+        raise SceneError(f"{path}: malformed TOML: nested too deeply.") from None
     except (OSError, UnicodeDecodeError) as err:
         raise SceneError(f"{path}: cannot read the file: {err}.") from None
-    return scene_from_dict(doc, source=str(path), default_name=path.stem)
+    scene = scene_from_dict(doc, source=str(path), default_name=limits.safe_name(path.stem))
+    limits.check_scene(scene, str(path))
+    return scene
 
 
 def load_catalogue(tag: str | None = None) -> list[Scene]:
