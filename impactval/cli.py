@@ -342,5 +342,8 @@ def _print_rows(df, as_json: bool, text_table) -> None:
         click.echo(json.dumps(clean))
 
 
+__import__("impactval.cli_tune").cli_tune.register(main)    # impactval tune, impactval materials (issue 15)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

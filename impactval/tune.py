@@ -361,7 +361,8 @@ class EngineObjective:
                  keep_series: bool = False) -> None:
         self.scene, self.engine, self.speeds = scene, engine, list(speeds)
         self.settings, self.options_of, self.store, self.workers = settings, options_of, store, workers
-        self.quantities, self.tol, self.keep_series = tuple(quantities), tol, keep_series
+        # series are always kept: the final evaluation may reuse a fit job and the report plots its f(t)
+        self.quantities, self.tol, self.keep_series = tuple(quantities), tol, True
         self.record = FitRecord()
 
     def jobs(self, params: np.ndarray):

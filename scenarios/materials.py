@@ -10,27 +10,29 @@ Values are typical room-temperature handbook values:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
 class Material:
-    """An isotropic linear-elastic material: `young` [Pa], `poisson` [-], `density` [kg/m^3]."""
+    """An isotropic linear-elastic material: `young` [Pa], `poisson` [-], `density` [kg/m^3]; `source`
+    says where the values come from (not part of the scene's identity: repr and equality ignore it)."""
 
     name: str
     young: float
     poisson: float
     density: float
+    source: str = field(default="", repr=False, compare=False)
 
 
 BUILTIN_MATERIALS: dict[str, Material] = {
     m.name: m
     for m in (
-        Material("steel", 210e9, 0.3, 7800.0),
-        Material("aluminium", 68.9e9, 0.33, 2700.0),
-        Material("titanium", 113.8e9, 0.342, 4430.0),
-        Material("glass", 72e9, 0.22, 2500.0),
-        Material("tungsten-carbide", 614e9, 0.22, 15000.0),
-        Material("pmma", 3.1e9, 0.37, 1190.0),
+        Material("steel", 210e9, 0.3, 7800.0, "structural/bearing steel, handbook values (the paper's worked case)"),
+        Material("aluminium", 68.9e9, 0.33, 2700.0, "6061-T6, ASM Aerospace Specification Metals"),
+        Material("titanium", 113.8e9, 0.342, 4430.0, "Ti-6Al-4V, ASM Aerospace Specification Metals"),
+        Material("glass", 72e9, 0.22, 2500.0, "soda-lime, Shelby, Introduction to Glass Science"),
+        Material("tungsten-carbide", 614e9, 0.22, 15000.0, "WC-Co (6 % Co), manufacturer data sheets"),
+        Material("pmma", 3.1e9, 0.37, 1190.0, "acrylic, Ashby, Materials Selection"),
     )
 }

@@ -172,12 +172,13 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
         raise SceneError(f"{src}: [materials] must be a table of [materials.NAME] tables.")
     for name, table in extra.items():
         sect = f"materials.{name}"
-        _check_keys(src, sect, table, {"young", "poisson", "density"}, set())
+        _check_keys(src, sect, table, {"young", "poisson", "density"}, {"source"})
         nu = table["poisson"]
         if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
             raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
         mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
-                              _positive(src, sect, "density", table["density"], "kg/m^3"))
+                              _positive(src, sect, "density", table["density"], "kg/m^3"),
+                              str(table.get("source", f"[materials.{name}] in {src}")))
     return mats
 
 
