@@ -240,12 +240,12 @@ def mujoco_force(pen: np.ndarray | float, solref: Sequence[float], solimp: Seque
 
 
 def law_plate(force: Callable[[np.ndarray], np.ndarray], mass: float, speed: float | Sequence[float],
-              delta_max: float, delta_min: float | None = None, points: int = 4000):
+              delta_max: float, delta_min: float | None = None, points: int = 20000):
     """Rigid-plate impact of an elastic law f(delta) (increasing, f(0) = 0), by quadrature:
     delta_m from U(delta_m) = m v^2/2, f_m = f(delta_m), t_m = 2 int_0^delta_m d delta / sqrt(v^2 - 2U/m)
     (substitution delta = delta_m (1 - s^2) removes the end singularity). The table of U spans
     [delta_min, delta_max] [m] geometrically (default delta_min = 1e-6 delta_max). Returns (t_m [s], f_m [N],
-    delta_m [m]) for one speed, or arrays of them for a sequence; ~1e-5 relative."""
+    delta_m [m]) for one speed, or arrays of them for a sequence; ~1e-6 relative at the default points."""
     lo = delta_min if delta_min is not None else 1e-6 * delta_max
     grid = np.concatenate([[0.0], np.geomspace(lo, delta_max, points)])
     f = np.asarray(force(grid), float)
@@ -563,8 +563,9 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
             def options_of(p):
                 return {"contact_stiffness": float(_fmt(k_ref * math.exp(p[0]))), "contact_exponent": exponent,
                         "contact_damping": 0.0}
+            # before: the adapter's linear k0 of the middle speed, or for the 1.5 law the fit's own start
             before = {"contact_stiffness": float(_fmt(k0_energy(mass, alpha, v_mid))), "contact_exponent": 1.0,
-                      "contact_damping": 0.0} if contact == "native" else {}
+                      "contact_damping": 0.0} if contact == "native" else options_of(np.array([x_start]))
             quantities = ("t_m", "f_m", "delta_m") if contact == "native-hertz" else ("t_m", "f_m")
         objective = EngineObjective(scene, engine, speeds, settings, options_of, db, workers, quantities, tol)
         sol = fit(objective, [x_start], diff_step=1e-4 if contact == "native-hertz" else 1e-3, max_nfev=max_nfev)

@@ -134,7 +134,7 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
     before = tuned.get("before", {})
     if before.get("residuals"):
         opts = ", ".join(f"`{k}={v}`" for k, v in before["options"].items())
-        out += residual_table(before["residuals"], f"Before (the energy-equivalent k0 of the middle speed: {opts})")
+        out += residual_table(before["residuals"], f"Before ({opts})")
     out += ["## Springs by speed (closed form, rigid plate)", "",
             f"A linear spring gives t_m * f_m = pi m v, Hertz 3.679 m v: the ratio {cf['linear_product_ratio']:.4f} "
             "means no k matches both. Single best k over the range (log least squares): "
