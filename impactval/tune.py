@@ -182,7 +182,7 @@ def damping_ratio(restitution: float) -> float:
     if not 0 < restitution <= 1:
         raise ImpactvalError(f"restitution must be in (0, 1], got {restitution!r}.")
     le = math.log(restitution)
-    return -le / math.sqrt(math.pi**2 + le * le)
+    return abs(le) / math.sqrt(math.pi**2 + le * le)
 
 
 def restitution_of(zeta: float) -> float:

@@ -151,7 +151,8 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
         out.append(f"| {t['speed']:.4g} | {_g(t['rebound_velocity'])} | {_g(t['restitution'], 5)} |")
     out += ["", "To add dissipation, model: linear spring-dashpot (Kelvin-Voigt), contact ending when the approach "
             "returns to zero: e = exp(-pi zeta / sqrt(1 - zeta^2)), c = 2 zeta sqrt(k m). For a Hertz law k is the "
-            "energy-equivalent k0 of the middle speed (an approximation).", "",
+            "energy-equivalent k0 of the middle speed (an approximation); the MuJoCo columns assume a flat solimp "
+            "(d0 = dwidth), where dampratio is exactly zeta.", "",
             "| e | zeta | k [N/m] | c [N s/m] | MuJoCo solref direct | MuJoCo solref time constant |",
             "|---:|---:|---:|---:|---|---|"]
     for r in restitution_rows(tuned, restitutions):
