@@ -2,7 +2,7 @@
 from impactval.errors import EngineError, ImpactvalError, SceneError
 
 __version__ = "0.1.0"
-__all__ = ["load_scene", "solve", "ImpactvalError", "SceneError", "EngineError", "__version__"]
+__all__ = ["load_scene", "solve", "structure_modes", "ImpactvalError", "SceneError", "EngineError", "__version__"]
 
 
 def load_scene(name_or_path):
@@ -20,3 +20,15 @@ def solve(scene, tol: float = 1e-6, **kwargs):
     from impactval.reference.solve import solve as _solve
 
     return _solve(scene, tol=tol, **kwargs)
+
+
+def structure_modes(scene, n=None):
+    """The first `n` modes of `scene`'s target seen from the impact point: an object with arrays `omega`
+    [rad/s], `modal_mass` [kg, shapes normalised to max 1] and `phi` (shape value at the impact point).
+
+    Rigid plate and ball targets have none; a modal target gives its own (the n lowest); beams (either
+    theory) and plates the n lowest. `n` may be omitted when the scene sets `modes` (or for a modal target).
+    """
+    from impactval.reference.structure import structure_modes as _modes
+
+    return _modes(scene, n)

@@ -154,11 +154,14 @@ def beam_static_flexibility(support: str, length: float, young: float, second_mo
 
 
 def beam_modes(beam, n: int, residual: bool = False) -> Modes:
-    """The first n modes of a `Beam` scene target seen from its impact point.
+    """The first n modes of a `Beam` scene target seen from its impact point (Euler-Bernoulli or, with
+    `beam.theory == "timoshenko"`, Timoshenko: reference/timoshenko.py).
 
     With `residual`, the static flexibility of all higher modes (the exact static flexibility
     minus the n retained modes' share) is attached for the mode-acceleration correction.
     """
+    if getattr(beam, "theory", "euler-bernoulli") == "timoshenko":
+        return _timoshenko_beam_modes(beam, n, residual)
     mat = beam.material
     omega = beam_frequencies(beam.support, n, beam.length, mat.young, beam.second_moment, mat.density, beam.area)
     phi = beam_shapes(beam.support, n, np.array([beam.impact_at]))[:, 0]
@@ -168,3 +171,18 @@ def beam_modes(beam, n: int, residual: bool = False) -> Modes:
         total = beam_static_flexibility(beam.support, beam.length, mat.young, beam.second_moment, beam.impact_x)
         res = max(total - float(np.sum(phi**2 / (mm * omega**2))), 0.0)
     return Modes(omega, mm, phi, res)
+
+
+def _timoshenko_beam_modes(beam, n: int, residual: bool) -> Modes:
+    """Timoshenko modes (both spectra, frequency order); computed for the next power of two >= n and cut, so
+    that the automatic mode-count doubling reuses them."""
+    from impactval.reference import timoshenko as tim
+
+    sec = tim.Section.of(beam)
+    big = 1 << max(int(n) - 1, 31).bit_length()
+    omega, mm, phi = (v[:n] for v in tim.timoshenko_modes(sec, beam.support, big, beam.impact_x))
+    res = 0.0
+    if residual:
+        total = tim.static_flexibility(sec, beam.support, beam.impact_x)
+        res = max(total - float(np.sum(phi**2 / (mm * omega**2))), 0.0)
+    return Modes(omega.copy(), mm.copy(), phi.copy(), res)

@@ -362,8 +362,11 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
     """
     from impactval.reference.solve import initial_mode_count, structure_modes
 
+    from impactval.reference.structure import contact_scene
+
     _check(tol, window, modes, stiffness)
     t0 = time.perf_counter()
+    scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     plate = plate_impact(mass, alpha, v0)
@@ -372,7 +375,7 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
     fixed = modes if modes is not None else getattr(target, "modes", None)
     model = "linear-rigid" if target.kind == "rigid-plate" else "linear-modal"
     trunc = Metrics(0.0, 0.0, 0.0)
-    if target.kind == "beam" and fixed is None:
+    if target.kind in ("beam", "plate") and fixed is None:
         n = initial_mode_count(scene)
         prev = None
         while True:

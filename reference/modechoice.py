@@ -129,6 +129,9 @@ def required_modes(scene, tol: float = 1e-3) -> ModeChoice:
     """
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or not 1e-8 <= tol <= 0.5:
         raise ImpactvalError(f"tol must be a relative tolerance between 1e-8 and 0.5, got {tol!r}.")
+    from impactval.reference.structure import contact_scene
+
+    scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     mass, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
     if scene.target.kind == "rigid-plate":
         z = np.zeros(0)
@@ -190,6 +193,8 @@ def _first_below(tails: np.ndarray, budget: float, n_all: int) -> int | None:
 
 
 def _extrapolate_plain(scene, n_all: int, tail_at_n_all: float, budget: float) -> int:
-    """Plain-model count beyond the table: the dropped static flexibility of a beam falls like n^-3."""
-    n = int(math.ceil(n_all * (tail_at_n_all / budget) ** (1.0 / 3.0)))
+    """Plain-model count beyond the table: the dropped static flexibility of a beam falls like n^-3, that of a
+    plate like n^-1 (modes fill the (m, n) plane: N ~ r^2, dropped sum ~ 1/r^2)."""
+    power = 1.0 if scene.target.kind == "plate" else 3.0
+    n = int(math.ceil(n_all * (tail_at_n_all / budget) ** (1.0 / power)))
     return min(max(n, n_all), 100000)

@@ -242,7 +242,7 @@ def _scene_modes(scene, modes: int | None) -> Modes:
 
     target = scene.target
     fixed = modes if modes is not None else getattr(target, "modes", None)
-    if target.kind == "beam" and fixed is None:
+    if target.kind in ("beam", "plate") and fixed is None:
         # automatic: every mode up to w = W_QUADRATURE_MAX, the rest as a residual static flexibility
         plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
         n = 8
@@ -273,6 +273,9 @@ def perturbation(scene, model: str = "hertz", modes: int | None = None) -> Pertu
         raise ImpactvalError(f"perturbation model must be 'hertz', 'hertz-sine' or 'linear', got {model!r}.")
     if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
         raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
+    from impactval.reference.structure import contact_scene
+
+    scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     plate = plate_impact(mass, alpha, v0)
@@ -299,7 +302,10 @@ def perturbation(scene, model: str = "hertz", modes: int | None = None) -> Pertu
 def perturbation_curve(scene, model: str = "hertz", modes: int | None = None, n: int = 801):
     """First-order approach curve: (t [s], delta [m], f [N]) over the zero-order contact [0, t_0]
     (t_0 = the rigid-plate duration of the model; first order, so the end is not shifted)."""
+    from impactval.reference.structure import contact_scene
+
     res = perturbation(scene, model, modes)
+    scene = contact_scene(scene)
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     plate = plate_impact(mass, alpha, v0)

@@ -20,7 +20,7 @@ import numpy as np
 
 from impactval.errors import ImpactvalError
 from impactval.reference import kernel
-from impactval.reference.beams import Modes, beam_modes, truncate_modes
+from impactval.reference.beams import Modes, beam_modes
 from impactval.reference.hertz import plate_impact
 from impactval.reference.result import Contact, ImpactResult, Metrics
 
@@ -61,14 +61,9 @@ def structure_modes(scene, n: int | None = None, residual: bool = False) -> Mode
     """The modal data of a scene's target (empty for a rigid plate). For a beam the first `n` modes,
     for a modal target the `n` lowest (all when n is None); `residual` adds the static flexibility
     of the rest."""
-    target = scene.target
-    if target.kind == "rigid-plate":
-        return Modes(np.zeros(0), np.zeros(0), np.zeros(0), 0.0)
-    if target.kind == "modal":
-        md = Modes(np.asarray(target.omega, float), np.asarray(target.modal_mass, float),
-                   np.asarray(target.phi, float), 0.0)
-        return md if n is None or n >= md.n else truncate_modes(md, int(n), residual)
-    return _beam_modes_cached(target, int(n if n is not None else (target.modes or 1)), residual)
+    from impactval.reference.structure import structure_modes as _modes    # the one dispatch on target kind
+
+    return _modes(scene, n, residual)
 
 
 def _select(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -206,13 +201,17 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
     if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
         raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
+    if scene.target.kind == "ball":     # two free spheres: the relative motion is a ball on a rigid plate
+        from impactval.reference.spheres import equivalent_plate_scene, two_sphere_result
+
+        return two_sphere_result(scene, solve(equivalent_plate_scene(scene), tol, window))
     t0 = time.perf_counter()
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     target = scene.target
     fixed = modes if modes is not None else getattr(target, "modes", None)
     model = "hertz-rigid" if target.kind == "rigid-plate" else "hertz-modal"
-    if target.kind == "beam" and fixed is None:
+    if target.kind in ("beam", "plate") and fixed is None:
         run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
         unc = Metrics(unc.t_m + trunc.t_m, unc.f_m + trunc.f_m, unc.delta_m + trunc.delta_m)
         model += "+static" if static_correction else ""
@@ -252,8 +251,7 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
 
 def initial_mode_count(scene) -> int:
     """First guess of the beam mode count: the modes up to ~8x the rigid-plate impact frequency."""
-    target = scene.target
     plate = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
-    md = beam_modes(target, 64)
+    md = structure_modes(scene, 64)
     below = int(np.sum(md.omega < 8.0 * plate.omega_m))
     return max(4, below)

@@ -53,6 +53,9 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
     from impactval.reference.modechoice import required_modes
     from impactval.reference.perturbation import perturbation, perturbation_curve
 
+    from impactval.reference.structure import contact_scene
+
+    scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     ball = scene.ball
     plate = plate_impact(ball.mass, scene.alpha, ball.velocity)
     ref = impactval.solve(scene, tol=tol)

@@ -14,17 +14,25 @@ TOML format (public, names fixed)::
     material = "steel"
     mass = 0.0327                      # optional, kg (overrides density x volume)
     [target]
-    kind = "beam"                      # "rigid-plate" | "beam" | "modal"
+    kind = "beam"                      # "rigid-plate" | "beam" | "modal" | "ball" | "plate"
     material = "steel"                 # contact face (for a beam also its density and modulus)
     support = "simply-supported"       # beam: "simply-supported" | "clamped-clamped" | "cantilever"
     length = 0.5                       # beam, m
     width = 0.01                       # beam, m
     height = 0.01                      # beam, m (depth in the impact direction)
     impact_at = 0.5                    # beam, fraction of the length from x = 0
-    modes = 40                         # beam, optional mode count (default: automatic)
+    modes = 40                         # beam, plate: optional mode count (default: automatic)
+    theory = "euler-bernoulli"         # beam, optional: "euler-bernoulli" (default) | "timoshenko"
     omega = [..]                       # modal, rad/s
     modal_mass = [..]                  # modal, kg (max-normalised shapes)
     phi = [..]                         # modal, each mode's shape value at the impact point
+    radius = 0.01                      # ball: the second sphere's radius, m
+    velocity = 0.0                     # ball, optional: its speed toward the first ball, m/s (default 0)
+    mass = 0.0327                      # ball, optional, kg (overrides density x volume)
+    length = 0.4                       # plate (simply supported): x side, m
+    width = 0.3                        # plate: y side, m
+    thickness = 0.005                  # plate: m
+    impact_at = [0.5, 0.5]             # plate: [x, y] fractions of length and width
     [materials.NAME]                   # optional: add or override materials
     young = 2.1e11
     poisson = 0.3
@@ -43,7 +51,9 @@ from impactval.errors import SceneError
 from impactval.scenarios.materials import BUILTIN_MATERIALS, Material
 
 SUPPORTS = ("simply-supported", "clamped-clamped", "cantilever")
-TARGET_KINDS = ("rigid-plate", "beam", "modal")
+PLATE_SUPPORTS = ("simply-supported",)
+BEAM_THEORIES = ("euler-bernoulli", "timoshenko")
+TARGET_KINDS = ("rigid-plate", "beam", "modal", "ball", "plate")
 CATALOGUE_DIR = Path(__file__).parent / "catalogue"
 
 
@@ -67,11 +77,12 @@ class RigidPlate:
 
 @dataclass(frozen=True)
 class Beam:
-    """Euler-Bernoulli beam of rectangular section hit on its top face.
+    """Beam of rectangular section hit on its top face.
 
     `length`, `width`, `height` [m] (height = depth in the impact direction), `impact_at` is the
     fraction of the length from x = 0 (the clamped end of a cantilever), `modes` the mode count
-    (None = chosen automatically to meet the tolerance).
+    (None = chosen automatically to meet the tolerance), `theory` "euler-bernoulli" or "timoshenko"
+    (shear and rotary inertia, Cowper's shear coefficient).
     """
 
     material: Material
@@ -81,7 +92,19 @@ class Beam:
     height: float
     impact_at: float
     modes: int | None = None
+    theory: str = "euler-bernoulli"
     kind: str = field(default="beam", init=False)
+
+    @property
+    def shear_coefficient(self) -> float:
+        """Cowper's shear coefficient of a rectangle, 10(1 + nu)/(12 + 11 nu) [-]."""
+        nu = self.material.poisson
+        return 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu)
+
+    @property
+    def shear_modulus(self) -> float:
+        """G = E / (2 (1 + nu)) [Pa]."""
+        return self.material.young / (2.0 * (1.0 + self.material.poisson))
 
     @property
     def area(self) -> float:
@@ -111,7 +134,43 @@ class ModalTarget:
     kind: str = field(default="modal", init=False)
 
 
-Target = RigidPlate | Beam | ModalTarget
+@dataclass(frozen=True)
+class BallTarget:
+    """A second free sphere on the same axis: `radius` [m], `velocity` [m/s] toward the first
+    ball (default 0), `mass` [kg]; both spheres deform (Hertz with both curvatures)."""
+
+    radius: float
+    velocity: float
+    material: Material
+    mass: float
+    kind: str = field(default="ball", init=False)
+
+
+@dataclass(frozen=True)
+class Plate:
+    """Kirchhoff plate, simply supported on all four edges, hit on its face.
+
+    `length` (x) and `width` (y) [m], `thickness` [m], `impact_at` = (x, y) fractions of length and
+    width, `modes` the mode count (the n lowest, None = chosen automatically).
+    """
+
+    material: Material
+    support: str
+    length: float
+    width: float
+    thickness: float
+    impact_at: tuple[float, float]
+    modes: int | None = None
+    kind: str = field(default="plate", init=False)
+
+    @property
+    def bending_stiffness(self) -> float:
+        """D = E h^3 / (12 (1 - nu^2)) [N m]."""
+        m = self.material
+        return m.young * self.thickness**3 / (12.0 * (1.0 - m.poisson**2))
+
+
+Target = RigidPlate | Beam | ModalTarget | BallTarget | Plate
 
 
 @dataclass(frozen=True)
@@ -135,9 +194,12 @@ class Scene:
 
     @cached_property
     def alpha(self) -> float:
-        """Hertz coefficient alpha [N/m^1.5], ball on a flat face (paper eq. 20)."""
-        from impactval.reference.hertz import hertz_alpha
+        """Hertz coefficient alpha [N/m^1.5]: ball on a flat face (paper eq. 20), or on a second
+        ball (both curvatures, 1/R = 1/R1 + 1/R2)."""
+        from impactval.reference.hertz import hertz_alpha, hertz_alpha_spheres
 
+        if self.target.kind == "ball":
+            return hertz_alpha_spheres(self.ball.radius, self.target.radius, self.e_star)
         return hertz_alpha(self.ball.radius, self.e_star)
 
 
@@ -200,6 +262,100 @@ def _float_list(src: str, key: str, value: Any) -> tuple[float, ...]:
     return tuple(out)
 
 
+# ----------------------------------------------------------------------------- one parser per target kind
+
+def _fraction(src: str, key: str, value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or not 0.0 < value < 1.0:
+        raise SceneError(f"{src}: [target] {key} must be a fraction of the {what} strictly between 0 and 1, "
+                         f"got {value!r}.")
+    return float(value)
+
+
+def _modes(src: str, t: Mapping[str, Any]) -> int | None:
+    modes = t.get("modes")
+    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 100000):
+        raise SceneError(f"{src}: [target] modes must be a whole number from 1 to 100000 (or omitted for an "
+                         f"automatic choice), got {modes!r}.")
+    return modes
+
+
+def _rigid_plate_target(src: str, t: Mapping[str, Any], mats: Mapping[str, Material]) -> RigidPlate:
+    _check_keys(src, "target", t, {"kind", "material"}, set())
+    return RigidPlate(_material(src, "target", t["material"], mats))
+
+
+def _beam_target(src: str, t: Mapping[str, Any], mats: Mapping[str, Material]) -> Beam:
+    _check_keys(src, "target", t, {"kind", "material", "support", "length", "width", "height", "impact_at"},
+                {"modes", "theory"})
+    if t["support"] not in SUPPORTS:
+        raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
+                         f"got {t['support']!r}.")
+    at = t["impact_at"]
+    if isinstance(at, bool) or not isinstance(at, (int, float)) or not math.isfinite(at) or not 0.0 < at <= 1.0:
+        raise SceneError(f"{src}: [target] impact_at must be a fraction of the length in (0, 1] "
+                         f"(0 < impact_at < 1 for a beam supported at both ends), got {at!r}.")
+    if at >= 1.0 and t["support"] != "cantilever":
+        raise SceneError(f"{src}: [target] impact_at = {at!r} is on a support of a {t['support']} beam; "
+                         f"use a value strictly between 0 and 1.")
+    theory = t.get("theory", "euler-bernoulli")
+    if theory not in BEAM_THEORIES:
+        raise SceneError(f"{src}: [target] theory must be one of {', '.join(map(repr, BEAM_THEORIES))}, "
+                         f"got {theory!r}.")
+    return Beam(_material(src, "target", t["material"], mats), t["support"],
+                _positive(src, "target", "length", t["length"], "m"),
+                _positive(src, "target", "width", t["width"], "m"),
+                _positive(src, "target", "height", t["height"], "m"), float(at), _modes(src, t), theory)
+
+
+def _modal_target(src: str, t: Mapping[str, Any], mats: Mapping[str, Material]) -> ModalTarget:
+    _check_keys(src, "target", t, {"kind", "material", "omega", "modal_mass", "phi"}, set())
+    omega = _float_list(src, "omega", t["omega"])
+    mm = _float_list(src, "modal_mass", t["modal_mass"])
+    phi = _float_list(src, "phi", t["phi"])
+    if not len(omega) == len(mm) == len(phi):
+        raise SceneError(f"{src}: [target] omega, modal_mass and phi must have equal lengths, got "
+                         f"{len(omega)}, {len(mm)} and {len(phi)}.")
+    for key, arr in (("omega", omega), ("modal_mass", mm)):
+        bad = [v for v in arr if v <= 0]
+        if bad:
+            raise SceneError(f"{src}: [target] {key} values must be positive, got {bad[0]!r}.")
+    return ModalTarget(_material(src, "target", t["material"], mats), omega, mm, phi)
+
+
+def _ball_target(src: str, t: Mapping[str, Any], mats: Mapping[str, Material]) -> BallTarget:
+    _check_keys(src, "target", t, {"kind", "material", "radius"}, {"velocity", "mass"})
+    mat = _material(src, "target", t["material"], mats)
+    radius = _positive(src, "target", "radius", t["radius"], "m")
+    v = t.get("velocity", 0.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SceneError(f"{src}: [target] velocity must be a finite speed in m/s toward the first ball "
+                         f"(negative: away from it), got {v!r}.")
+    mass = (_positive(src, "target", "mass", t["mass"], "kg") if "mass" in t
+            else mat.density * 4.0 / 3.0 * math.pi * radius**3)
+    return BallTarget(radius, float(v), mat, mass)
+
+
+def _plate_target(src: str, t: Mapping[str, Any], mats: Mapping[str, Material]) -> Plate:
+    _check_keys(src, "target", t, {"kind", "material", "support", "length", "width", "thickness", "impact_at"},
+                {"modes"})
+    if t["support"] not in PLATE_SUPPORTS:
+        raise SceneError(f"{src}: [target] support of a plate must be one of {', '.join(map(repr, PLATE_SUPPORTS))}, "
+                         f"got {t['support']!r}.")
+    at = t["impact_at"]
+    if not isinstance(at, list) or len(at) != 2:
+        raise SceneError(f"{src}: [target] impact_at of a plate must be [x_fraction, y_fraction] (two numbers "
+                         f"strictly between 0 and 1), got {at!r}.")
+    xy = (_fraction(src, "impact_at[0]", at[0], "length"), _fraction(src, "impact_at[1]", at[1], "width"))
+    return Plate(_material(src, "target", t["material"], mats), t["support"],
+                 _positive(src, "target", "length", t["length"], "m"),
+                 _positive(src, "target", "width", t["width"], "m"),
+                 _positive(src, "target", "thickness", t["thickness"], "m"), xy, _modes(src, t))
+
+
+_TARGET_PARSERS = {"rigid-plate": _rigid_plate_target, "beam": _beam_target, "modal": _modal_target,
+                   "ball": _ball_target, "plate": _plate_target}
+
+
 def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_name: str = "scene") -> Scene:
     """Build and validate a Scene from a parsed TOML document (a mapping)."""
     src = source
@@ -221,44 +377,7 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     kind = t.get("kind")
     if kind not in TARGET_KINDS:
         raise SceneError(f"{src}: [target] kind must be one of {', '.join(map(repr, TARGET_KINDS))}, got {kind!r}.")
-    target: Target
-    if kind == "rigid-plate":
-        _check_keys(src, "target", t, {"kind", "material"}, set())
-        target = RigidPlate(_material(src, "target", t["material"], mats))
-    elif kind == "beam":
-        _check_keys(src, "target", t, {"kind", "material", "support", "length", "width", "height", "impact_at"},
-                    {"modes"})
-        if t["support"] not in SUPPORTS:
-            raise SceneError(f"{src}: [target] support must be one of {', '.join(map(repr, SUPPORTS))}, "
-                             f"got {t['support']!r}.")
-        at = t["impact_at"]
-        if isinstance(at, bool) or not isinstance(at, (int, float)) or not math.isfinite(at) or not 0.0 < at <= 1.0:
-            raise SceneError(f"{src}: [target] impact_at must be a fraction of the length in (0, 1] "
-                             f"(0 < impact_at < 1 for a beam supported at both ends), got {at!r}.")
-        if at >= 1.0 and t["support"] != "cantilever":
-            raise SceneError(f"{src}: [target] impact_at = {at!r} is on a support of a {t['support']} beam; "
-                             f"use a value strictly between 0 and 1.")
-        modes = t.get("modes")
-        if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or not 1 <= modes <= 100000):
-            raise SceneError(f"{src}: [target] modes must be a whole number from 1 to 100000 (or omitted for an "
-                             f"automatic choice), got {modes!r}.")
-        target = Beam(_material(src, "target", t["material"], mats), t["support"],
-                      _positive(src, "target", "length", t["length"], "m"),
-                      _positive(src, "target", "width", t["width"], "m"),
-                      _positive(src, "target", "height", t["height"], "m"), float(at), modes)
-    else:
-        _check_keys(src, "target", t, {"kind", "material", "omega", "modal_mass", "phi"}, set())
-        omega = _float_list(src, "omega", t["omega"])
-        mm = _float_list(src, "modal_mass", t["modal_mass"])
-        phi = _float_list(src, "phi", t["phi"])
-        if not len(omega) == len(mm) == len(phi):
-            raise SceneError(f"{src}: [target] omega, modal_mass and phi must have equal lengths, got "
-                             f"{len(omega)}, {len(mm)} and {len(phi)}.")
-        for key, arr in (("omega", omega), ("modal_mass", mm)):
-            bad = [v for v in arr if v <= 0]
-            if bad:
-                raise SceneError(f"{src}: [target] {key} values must be positive, got {bad[0]!r}.")
-        target = ModalTarget(_material(src, "target", t["material"], mats), omega, mm, phi)
+    target = _TARGET_PARSERS[kind](src, t, mats)
 
     name = doc.get("name", default_name)
     if not isinstance(name, str) or not name:
@@ -269,6 +388,9 @@ def scene_from_dict(doc: Mapping[str, Any], source: str = "<scene>", default_nam
     tags = doc.get("tags", [])
     if not isinstance(tags, list) or not all(isinstance(x, str) for x in tags):
         raise SceneError(f"{src}: tags must be a list of strings, got {tags!r}.")
+    if target.kind == "ball" and ball.velocity + target.velocity <= 0:
+        raise SceneError(f"{src}: [target] velocity = {target.velocity!r} m/s: the balls never meet (approach speed "
+                         f"[ball] velocity + [target] velocity must be positive).")
     return Scene(name, ball, target, desc, tuple(tags), source)
 
 

@@ -74,7 +74,7 @@ BAD = [
     ("impact_at = 0.5", "impact_at = 1.5", "impact_at must be a fraction"),
     ("impact_at = 0.5", "impact_at = 1.0", "is on a support"),
     ('support = "simply-supported"', 'support = "glued"', "support must be one of"),
-    ('kind = "beam"', 'kind = "plate"', "kind must be one of"),
+    ('kind = "beam"', 'kind = "shell"', "kind must be one of"),
     ("length = 0.5", "length = 0", "length must be a positive"),
     ("height = 0.01", "height = \"thick\"", "height must be a positive"),
     ("impact_at = 0.5", "impact_at = 0.5\nmodes = 0", "modes must be a whole number"),
