@@ -489,6 +489,10 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
         raise ImpactvalError(f"tune: unknown engine {engine!r}; known: {', '.join(TUNE_ENGINES)}.")
     if contact not in ("native", "native-hertz"):
         raise ImpactvalError(f"tune: --contact must be native or native-hertz, got {contact!r}.")
+    import importlib.util
+
+    if importlib.util.find_spec(engine) is None:
+        raise ImpactvalError(f"tune: {engine} is not installed: pip install 'impactval[{engine}]'.")
     if engine == "pybullet" and contact == "native-hertz":
         raise ImpactvalError("tune: pybullet has no pasteable Hertz law (its native-hertz mode updates the CFM every "
                              "step from the penetration); use --contact native.")

@@ -253,6 +253,26 @@ def test_exudyn_recovers_alpha(tmp_path):
     assert tuned.engine_runs > 2
 
 
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_linear_fit_is_the_spring_it_claims(engine, tmp_path):
+    """A linear tune: the engine's impacts are those of the spring k the options encode (pi sqrt(m/k),
+    v sqrt(k m), independent closed form), and that spring is near the log-least-squares compromise."""
+    pytest.importorskip(engine)
+    speeds = (0.5, 2.0)
+    tuned = T.tune(engine, PLATE, speeds, store=str(tmp_path / "t.sqlite"), workers=2, max_nfev=3)
+    k = tuned.parameters["k"]
+    if engine == "mujoco":
+        assert k == pytest.approx(-float(tuned.options["mujoco.solref"].split(",")[0]) * M, rel=1e-9)
+    else:
+        assert k == pytest.approx(tuned.options["pybullet.erp"] / (tuned.options["pybullet.cfm"] * tuned.dt), rel=1e-9)
+    for r in tuned.residuals:
+        t_m, f_m, d_m = T.linear_plate(M, k, r["speed"])
+        assert (r["t_m"], r["f_m"], r["delta_m"]) == pytest.approx((t_m, f_m, d_m), rel=1e-3)
+    k_closed = T.linear_compromise(M, T.hertz_targets(PLATE, speeds))
+    assert k == pytest.approx(k_closed, rel=0.1)
+    assert tuned.before_residuals and tuned.engine_runs >= 2 * len(speeds)
+
+
 @pytest.mark.slow
 @requires_mujoco
 def test_bar_mujoco_plate_range(tmp_path):
