@@ -140,10 +140,11 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
             "means no k matches both. Single best k over the range (log least squares): "
             f"{cf['k_compromise']:.6g} N/m.", "",
             "| v0 [m/s] | k0 energy-equivalent [N/m] | k matching t_m [N/m] | k matching f_m [N/m] | "
-            "k equal errors [N/m] |", "|---:|---:|---:|---:|---:|"]
+            "k equal errors [N/m] | MuJoCo solref of k equal (flat solimp) |", "|---:|---:|---:|---:|---:|---|"]
+    m_eff = cf.get("m_eff", cf["mass"])
     for r in cf["k_by_speed"]:
         out.append(f"| {r['speed']:.4g} | {r['k0_energy']:.6g} | {r['k_t_m']:.6g} | {r['k_f_m']:.6g} | "
-                   f"{r['k_equal']:.6g} |")
+                   f"{r['k_equal']:.6g} | `{-r['k_equal'] / m_eff:.6g} 0` |")
     out += ["", "## Restitution", "",
             "The reference is elastic; its rebound speed over approach speed (the elastic truth, < 1 on a flexible "
             "target where energy stays in vibration):", "", "| v0 [m/s] | reference rebound [m/s] | e |", "|---:|---:|---:|"]

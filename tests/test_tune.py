@@ -16,7 +16,7 @@ from impactval import tune as T
 from impactval.errors import ImpactvalError
 from impactval.reference.hertz import plate_impact
 
-from conftest import requires_exudyn, requires_mujoco  # noqa: F401 - markers from the suite's conftest
+from conftest import requires_exudyn, requires_mujoco, run_py
 
 PLATE = impactval.load_scene("plate_steel")
 M, ALPHA = PLATE.ball.mass, PLATE.alpha
@@ -314,6 +314,27 @@ def test_materials_lists_sources(tmp_path):
     a = impactval.load_scene(str(scene))
     scene.write_text(scene.read_text().replace("mill certificate 42", "other"))
     assert impactval.load_scene(str(scene)).ball == a.ball
+
+
+def test_tune_modules_import_no_engine():
+    code = ("import impactval.tune, impactval.reports.tune, impactval.cli_tune, impactval.cli, sys; "
+            "print(sorted({'mujoco', 'pybullet', 'exudyn', 'matplotlib'} & set(sys.modules)) or '')")
+    assert run_py(code) == ""
+
+
+@requires_mujoco
+def test_tune_command_writes_json_report_plot(tmp_path):
+    out = tmp_path / "t"
+    proc = _cli("tune", "mujoco", "plate_steel", "--speeds", "0.5,2", "--max-evals", "2", "--out", str(out),
+                "--restitution", "0.8")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((out / "tuned.json").read_text())
+    assert data["engine"] == "mujoco" and data["engine_runs"] >= 4
+    assert "--option mujoco.solref=" in proc.stdout
+    md = (out / "tune.md").read_text()
+    assert '<pair geom1="BALL" geom2="TARGET"' in md and "| 0.8 |" in md and "m_eff" in md
+    pytest.importorskip("matplotlib")
+    assert (out / "tune_force.png").stat().st_size > 10_000
 
 
 def test_tune_bad_input_is_one_line_exit_2():
