@@ -60,8 +60,15 @@ def tune(engine, scene, speeds, contact, dt, out, store, restitutions, start, ma
     out_dir.mkdir(parents=True, exist_ok=True)
     store_where = store or str(out_dir / "tune.sqlite")
     click.echo(f"impactval tune: {engine} on {sc.name}, {len(vs)} speeds, contact {contact}", err=True)
-    result = T.tune(engine, sc, vs, contact=contact, dt=dt, store=store_where, workers=jobs, tol=tol, start=start,
-                    max_nfev=max_evals)
+    from impactval.runner import RunInterrupted
+
+    try:
+        result = T.tune(engine, sc, vs, contact=contact, dt=dt, store=store_where, workers=jobs, tol=tol, start=start,
+                        max_nfev=max_evals)
+    except RunInterrupted as stop:
+        click.echo(f"impactval tune: interrupted; the finished engine runs are stored in {store_where}: rerun the "
+                   f"same command to resume the fit", err=True)
+        sys.exit(stop.exit_code)
     path = T.write(result, out_dir)
     data = result.as_json()
     plot = None
