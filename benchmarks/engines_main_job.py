@@ -7,7 +7,8 @@ included, through a sitecustomize hook) and with this tree, alternately (old, ne
 the wall times and their ratio. Also runs this tree with --dt auto (the new default). The machine is
 shared: compare the ratio, not the seconds.
 
-    python benchmarks/engines_main_job.py [--ref main] [--dt 5e-8] [--repeat 1] [--scenes a,b]
+    python benchmarks/engines_main_job.py [--ref main] [--dt 5e-8] [--repeat 1] [--scenes a,b] [--no-warm]
+    [--no-auto]      (measured against 8a2eec3, main before engines v2: see docs/mujoco.md)
 """
 from __future__ import annotations
 
@@ -64,6 +65,8 @@ def main() -> None:
     ap.add_argument("--dt", default="5e-8")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--scenes", default="")
+    ap.add_argument("--no-warm", action="store_true", help="skip the warm-up runs (caches already warm)")
+    ap.add_argument("--no-auto", action="store_true", help="skip the run of this tree at --dt auto")
     args = ap.parse_args()
     scenes = [s for s in args.scenes.split(",") if s]
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,16 +78,18 @@ def main() -> None:
         Path(root + "-hook", "sitecustomize.py").write_text(HOOK)
         print(f"main job: catalogue{' ' + ','.join(scenes) if scenes else ''}, engines mujoco,pybullet,exudyn; "
               f"old = {args.ref}, new = this tree")
-        run_job(root, args.dt, os.path.join(tmp, "warm-old"), scenes)        # warm caches (FE beams, kernels)
-        run_job(None, args.dt, os.path.join(tmp, "warm-new"), scenes)
+        if not args.no_warm:
+            run_job(root, args.dt, os.path.join(tmp, "warm-old"), scenes)        # warm caches (FE beams, kernels)
+            run_job(None, args.dt, os.path.join(tmp, "warm-new"), scenes)
         old, new = [], []
         for i in range(args.repeat):
             old.append(run_job(root, args.dt, os.path.join(tmp, f"o{i}"), scenes))
             new.append(run_job(None, args.dt, os.path.join(tmp, f"n{i}"), scenes))
-        auto = run_job(None, "auto", os.path.join(tmp, "auto"), scenes)
+        auto = None if args.no_auto else run_job(None, "auto", os.path.join(tmp, "auto"), scenes)
     o, n = min(old), min(new)
     print(f"new / old at dt = {args.dt}: {n / o:.2f}  (old {o:.1f} s, new {n:.1f} s; bar: <= 1.20)")
-    print(f"new at dt = auto / old at dt = {args.dt}: {auto / o:.2f}  (new auto {auto:.1f} s)")
+    if auto is not None:
+        print(f"new at dt = auto / old at dt = {args.dt}: {auto / o:.2f}  (new auto {auto:.1f} s)")
 
 
 if __name__ == "__main__":

@@ -221,6 +221,13 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
             break
         n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(me.largest / tol) * 1.05))))
         me = model_error(scene, hencky_chain(beam, n, rotary))
+    if me.largest > tol:          # capped: the error depends on where the impact point sits in its segment,
+        best = (me.largest, n, me)  # so take the N near the cap with the smallest model error
+        for m in range(max(MIN_SEGMENTS, max_segments - 12), max_segments + 1):
+            e = model_error(scene, hencky_chain(beam, m, rotary))
+            if e.largest < best[0]:
+                best = (e.largest, m, e)
+        _, n, me = best
     return ChainSizing(n, count, _freq_error(beam, hencky_chain(beam, n, rotary), count), me)
 
 

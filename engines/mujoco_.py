@@ -304,6 +304,16 @@ class _Run:
         self.__dict__.update(kw)
 
 
+SUPPORTED_KINDS = ("rigid-plate", "beam", "modal")
+
+
+def _check_kind(scene) -> None:
+    """Targets this adapter models; others (ball, Kirchhoff plate) become a `skipped` row."""
+    kind = scene.target.kind
+    if kind not in SUPPORTED_KINDS:
+        raise EngineError(f"mujoco: target kind {kind!r} is not supported; supported: {', '.join(SUPPORTED_KINDS)}.")
+
+
 class MujocoAdapter(SteppingAdapter):
     """MuJoCo (`pip install 'impactval[mujoco]'`); see the module docstring for the model."""
 
@@ -338,6 +348,7 @@ class MujocoAdapter(SteppingAdapter):
         from impactval.engines.chain import model_error
         from impactval.reference.hertz import ContactLaw
 
+        _check_kind(scene)
         chain = self.chain(scene, settings)
         law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
         if settings.contact == "native-hertz":
@@ -362,6 +373,7 @@ class MujocoAdapter(SteppingAdapter):
 
         from impactval.reference.hertz import plate_impact
 
+        _check_kind(scene)
         if scene.target.kind == "modal" and settings.contact != "hertz":
             raise EngineError(f"mujoco: a modal target has no surface to collide with; use contact 'hertz' "
                               f"(got {settings.contact!r}).")

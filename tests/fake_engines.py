@@ -48,6 +48,8 @@ def __getattr__(name):          # "fake_engines:SlowMujoco" without importing Mu
     if name == "SlowMujoco":
         return _slow_mujoco()
     raise AttributeError(name)
+
+
 class Raises(EngineAdapter):
     """Raises an ordinary exception while simulating."""
 

@@ -249,7 +249,9 @@ def test_link_inertia_strictly_inside_the_triangle_inequality():
 @pytest.mark.slow
 def test_geometry_sweep_never_crashes(adapter):
     """The sweep that found the inertia crash (issue 11): beams of many lengths, sections, materials and
-    supports, each built in Bullet and run for its first contact at the automatic step: never crashed."""
+    supports, each built in Bullet and run for its first contact at the automatic step: never crashed.
+    (Checked: with the old inertia [i_x, i_y, i_x + i_y] geometry 3 of these 12 crashes in
+    calculateMassMatrix, "calculate mass matrix failed".)"""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
