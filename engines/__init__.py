@@ -11,9 +11,12 @@ ENGINES: dict[str, str] = {
     "mujoco": "impactval.engines.mujoco_:MujocoAdapter",
     "pybullet": "impactval.engines.pybullet_:PybulletAdapter",
     "exudyn": "impactval.engines.exudyn_:ExudynAdapter",
+    "mujoco-warp": "impactval.engines.mujoco_warp_:MujocoWarpAdapter",
+    "newton": "impactval.engines.newton_:NewtonAdapter",
 }
 #: the Python module each engine needs
-ENGINE_MODULES: dict[str, str] = {"mujoco": "mujoco", "pybullet": "pybullet", "exudyn": "exudyn"}
+ENGINE_MODULES: dict[str, str] = {"mujoco": "mujoco", "pybullet": "pybullet", "exudyn": "exudyn",
+                                  "mujoco-warp": "mujoco_warp", "newton": "newton"}
 
 
 def engine_status() -> dict[str, str]:

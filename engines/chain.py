@@ -206,6 +206,8 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
     `adjust(n) -> n` lets an engine move N (e.g. PyBullet: impact point near a segment centre)."""
     from impactval.reference.modechoice import required_modes
 
+    actual = scene
+    scene = euler_bernoulli(scene)  # a chain discretises Euler-Bernoulli: size it against that theory
     beam = scene.target
     adjust = adjust or (lambda n: n)
     count = required_modes(scene, tol).count
@@ -228,7 +230,20 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
             if e.largest < best[0]:
                 best = (e.largest, m, e)
         _, n, me = best
+    if actual is not scene:       # reported against the scene's own theory: discretisation + structure theory
+        me = model_error(actual, hencky_chain(beam, n, rotary))
     return ChainSizing(n, count, _freq_error(beam, hencky_chain(beam, n, rotary), count), me)
+
+
+def euler_bernoulli(scene):
+    """`scene` with its beam in Euler-Bernoulli theory (the theory a Hencky chain discretises);
+    the scene itself when it already is (or is not a beam)."""
+    import dataclasses
+
+    target = scene.target
+    if getattr(target, "theory", "euler-bernoulli") == "euler-bernoulli":
+        return scene
+    return dataclasses.replace(scene, target=dataclasses.replace(target, theory="euler-bernoulli"))
 
 
 def centred(impact_at: float, lo: int, hi: int, prefer: int) -> int:

@@ -52,6 +52,9 @@ def main() -> None:
     """impactval: validation suite for physics engines on elastic impact (SI units)."""
 
 
+main.add_command(__import__("impactval.cli_engines", fromlist=["engines_command"]).engines_command)
+
+
 @main.command()
 @click.option("--tag", default=None, help="Only scenes carrying this tag.")
 def scenes(tag: str | None) -> None:
@@ -86,6 +89,14 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
     scenes_ = [impactval.load_scene(n) for n in names]
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
+    if window:
+        from impactval.reference.hertz import plate_impact
+        from impactval.reference.solve import _check_tol, check_window
+
+        if not (math.isfinite(window) and window >= 0):
+            raise ImpactvalError(f"--window must be a non-negative time in s, got {window!r}.")
+        for sc in scenes_:      # refuse up front, before any output
+            check_window(window, plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity).t_m, _check_tol(tol))
     _warn_if_compiling()
     if not as_json:
         click.echo(f"{'scene':24s} {'t_m [us]':>22s} {'f_m [N]':>24s} {'delta_m [um]':>22s} "
@@ -97,10 +108,12 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
             click.echo(json.dumps({"scene": r.scene, "t_m": r.t_m, "f_m": r.f_m, "delta_m": r.delta_m,
                                    "uncertainty": u.as_dict(), "modes": r.modes,
                                    "rebound_velocity": r.rebound_velocity, "energy_error": r.energy_error,
-                                   "contacts": [c.__dict__ for c in r.contacts]}))
+                                   "contacts": [c.__dict__ for c in r.contacts], "validity": list(r.validity)}))
         else:
             click.echo(f"{r.scene:24s} {_pm(r.t_m * 1e6, u.t_m * 1e6):>22s} {_pm(r.f_m, u.f_m):>24s} "
                        f"{_pm(r.delta_m * 1e6, u.delta_m * 1e6):>22s} {r.modes:5d} {len(r.contacts):8d}")
+            for warning in r.validity:
+                click.echo(f"  ! {warning}")
         if curve:
             import numpy as np
 
@@ -115,7 +128,7 @@ def _explain(sc, tol: float) -> None:
     """The modes that matter for `sc` at relative tolerance `tol` (first-order weights, issue 3)."""
     import numpy as np
 
-    from impactval.reference.modechoice import required_modes
+    from impactval.reference.modechoice import SAFETY, required_modes
 
     c = required_modes(sc, min(max(tol, 1e-8), 0.5))
     if len(c.s) == 0:
@@ -125,7 +138,22 @@ def _explain(sc, tol: float) -> None:
     click.echo(f"  structure effect (first order): t_m {100 * e.t_m:+.3f} %, f_m {100 * e.f_m:+.3f} %, "
                f"delta_m {100 * e.delta_m:+.3f} %; rigid plate enough at tol {c.tol:g}: "
                f"{'yes' if c.rigid_plate_enough else 'no'}")
-    click.echo(f"  modes needed: {c.count} (+ residual static flexibility), {c.count_without_residual} without it")
+    from impactval.reference.validity import perturbation_validity
+
+    for warning in perturbation_validity(e.t_m, e.delta_m)[0]:
+        click.echo(f"  ! structure effect and mode weights are first-order: {warning.split(': ', 1)[1]}")
+    click.echo(f"  modes needed (first-order weights, a-priori, safety factor {1 / SAFETY:g}): {c.count} with the residual "
+               f"static flexibility, {c.count_without_residual} without it")
+    if sc.target.kind == "beam" and getattr(sc.target, "modes", None) is None:
+        import impactval
+
+        solved = impactval.solve(sc, tol=c.tol).modes
+        click.echo(f"  modes the solve used at tol {c.tol:g}: {solved} (measured: doubled until the n- and 2n-mode "
+                   f"models, each with the residual, agree within tol; the first-order count above is a bound "
+                   f"from weights, so it is {'larger' if c.count > solved else 'smaller' if c.count < solved else 'the same'})")
+    elif sc.target.kind != "rigid-plate":
+        click.echo(f"  modes the solve used: {len(sc.target.omega) if sc.target.kind == 'modal' else sc.target.modes} "
+                   f"(the scene's)")
     size = np.maximum(np.abs(c.d_t), np.abs(c.d_f))
     top = sorted(int(i) for i in np.argsort(-size)[:8] if size[i] > 0)
     click.echo(f"  {'mode':>6s} {'omega [rad/s]':>14s} {'w':>9s} {'s':>9s} {'s*TH (t_m)':>11s} {'1.5s*MH (f_m)':>13s}")
@@ -148,17 +176,24 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
             r = solve_linear(sc, tol=tol, window=window)
             m, u, n, label = r.metrics, r.uncertainty, r.modes, r.model
             series = (r.t, r.delta, r.f)
+            validity = ()
         else:
             p = perturbation(sc, "hertz")
-            m, u, n, label = p.metrics, None, len(p.weights.s), "hertz-first-order"
+            m, u, n, label, validity = p.metrics, None, len(p.weights.s), "hertz-first-order", p.validity
+            if curve and not math.isfinite(m.t_m):
+                raise ImpactvalError(f"--curve: {sc.name} has no first-order answer ({validity[0]}).")
             series = perturbation_curve(sc, "hertz") if curve else None
         if as_json:
-            click.echo(json.dumps({"scene": sc.name, "model": label, "t_m": m.t_m, "f_m": m.f_m, "delta_m": m.delta_m,
-                                   "uncertainty": None if u is None else u.as_dict(), "modes": n}))
+            finite = (lambda x: x if math.isfinite(x) else None)
+            click.echo(json.dumps({"scene": sc.name, "model": label, "t_m": finite(m.t_m), "f_m": finite(m.f_m),
+                                   "delta_m": finite(m.delta_m), "uncertainty": None if u is None else u.as_dict(),
+                                   "modes": n, "validity": list(validity)}))
         else:
-            pm = (lambda x, du, k: _pm(x * k, du * k)) if u is not None else (lambda x, du, k: f"{x * k:.9g}")
+            pm = (lambda x, du, k: _pm(x * k, du * k)) if u is not None else (lambda x, du, k: _pm(x * k, 0.0))
             click.echo(f"{sc.name:24s} {pm(m.t_m, u.t_m if u else 0, 1e6):>22s} {pm(m.f_m, u.f_m if u else 0, 1):>24s} "
                        f"{pm(m.delta_m, u.delta_m if u else 0, 1e6):>22s} {n:5d}  {label}")
+            for warning in validity:
+                click.echo(f"  ! {warning}")
         if curve:
             np.savetxt(curve, np.column_stack(series), delimiter=",", header="t_s,delta_m,f_N", comments="")
         if explain and not as_json:

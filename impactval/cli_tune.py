@@ -132,7 +132,7 @@ def _console(data) -> str:
 @click.command(name="materials")
 @click.argument("scene", required=False)
 def materials(scene) -> None:
-    """List the material catalogue (E, nu, rho, source); with SCENE also that scene's [materials] table."""
+    """List the material catalogue (E, nu, rho, yield stress, source); with SCENE also that scene's materials."""
     from impactval.scenarios.materials import BUILTIN_MATERIALS
 
     mats = dict(BUILTIN_MATERIALS)
@@ -142,9 +142,11 @@ def materials(scene) -> None:
         sc = impactval.load_scene(scene)
         for m in (sc.ball.material, sc.target.material):
             mats[m.name] = m
-    click.echo(f"{'material':<18} {'E [GPa]':>9} {'nu':>6} {'rho [kg/m^3]':>13}  source")
+    click.echo(f"{'material':<18} {'E [GPa]':>9} {'nu':>6} {'rho [kg/m^3]':>13} {'yield [MPa]':>12}  source")
     for m in mats.values():
-        click.echo(f"{m.name:<18} {m.young / 1e9:9.4g} {m.poisson:6.3g} {m.density:13.6g}  {m.source or 'not given'}")
+        y = getattr(m, "yield_stress", None)
+        y_s = f"{y / 1e6:12.4g}" if y else f"{'-':>12}"
+        click.echo(f"{m.name:<18} {m.young / 1e9:9.4g} {m.poisson:6.3g} {m.density:13.6g} {y_s}  {m.source or 'not given'}")
 
 
 def register(group: click.Group) -> None:

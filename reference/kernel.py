@@ -30,6 +30,9 @@ from numba import njit
 
 STATUS_OK = 0
 STATUS_OUT_OF_NODES = 1
+#: free flight in a window advances in jumps of at most window / SERIES_SAMPLES (the series keeps about this
+#: many samples over a long window; contacts are integrated at full resolution)
+SERIES_SAMPLES = 20000
 
 
 @njit(cache=True)
@@ -153,10 +156,16 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0):
+def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0, omega=None,
+        sample_dt=0.0):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
     and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
     table level j + j0 (so one table set serves base steps H and H/2).
+
+    In the window, free flight (no force: ball and modes move exactly) advances in jumps of up to
+    `sample_dt` [s] (0: no jumps) whenever a jump provably cannot reach a contact: the gap x1 - x2 can
+    close no faster than u + sum omega_i |y_i|, and never closes once the ball moves away with
+    x1 < -sum |y_i| (free modes keep |y_i|). `omega` [rad/s] is needed for the jumps.
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
@@ -217,6 +226,58 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     while True:
         if count >= max_nodes:
             return STATUS_OUT_OF_NODES, count, ta, da, fa, xa, ua, ea, flags
+        # ---------------------------------------------------------------- free-flight jump (window only)
+        if (not in_contact) and t_end > 0.0 and sample_dt > 0.0 and omega is not None:
+            amp = 0.0
+            vel = 0.0
+            x2 = 0.0
+            for i in range(n):
+                a_i = np.sqrt(yr[i] * yr[i] + yi[i] * yi[i])
+                amp += a_i
+                vel += omega[i] * a_i
+                x2 += yi[i]
+            gap = x1 - x2                      # < 0 in free flight
+            h_safe = 0.0
+            if u <= 0.0 and x1 + amp < 0.0:
+                h_safe = np.inf                # moving away and out of reach of every mode
+            else:
+                if u + vel <= 0.0:
+                    h_safe = np.inf
+                elif gap < 0.0:
+                    h_safe = -gap / (u + vel)
+                if u > 0.0 and x1 + amp < 0.0:
+                    h_safe = max(h_safe, -(x1 + amp) / u)
+            h = min(0.5 * h_safe if h_safe < np.inf else sample_dt, sample_dt, t_end - t)
+            if h > 2.0 * H:
+                emod = 0.0
+                for i in range(n):
+                    cs_ = np.cos(omega[i] * h)
+                    sn_ = np.sin(omega[i] * h)
+                    a = cs_ * yr[i] - sn_ * yi[i]
+                    b = sn_ * yr[i] + cs_ * yi[i]
+                    yr[i] = a
+                    yi[i] = b
+                    emod += ew[i] * (a * a + b * b)
+                x2 = 0.0
+                for i in range(n):
+                    x2 += yi[i]
+                x1 = x1 + u * h
+                t = t + h
+                delta = x1 - x2
+                f = 0.0
+                ta[count] = t
+                da[count] = delta
+                fa[count] = 0.0
+                xa[count] = x1
+                ua[count] = u
+                ea[count] = 0.5 * m0 * u * u + 0.5 * emod
+                seg_start = count             # the force stencil restarts here (f = 0 before)
+                m_prev = -1
+                j_prev = 0
+                count += 1
+                if t >= t_end * (1 - 1e-12):
+                    return STATUS_OK, count, ta, da, fa, xa, ua, ea, flags
+                continue
         # ---------------------------------------------------------------- choose the step
         if in_contact:
             h_allow = H
@@ -513,50 +574,88 @@ def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
-    """The fine (base step H) and coarse (2H) runs that make one error estimate, in one call.
+    """The fine (base step H), coarse (2H) and coarsest (4H) runs that make one error estimate, in one call.
 
-    The tables for steps 2H/2^k, k = 0..J+1, serve both (coarse: k = 0..J, fine: k = 1..J+1), so the
-    smallest step scales with H and its error shows in the difference. Returns (status, n_nodes and
-    series of the fine run, its contacts, the coarse run's contacts); contacts rows are
-    (t_start, t_end, delta_max).
+    The tables for steps 4H/2^k, k = 0..J+2, serve all three (coarsest: k = 0..J, coarse: 1..J+1, fine:
+    2..J+2), so the smallest step scales with H and its error shows in the differences. Returns (status,
+    n_nodes and series of the fine run, its contacts, the coarse run's contacts, the coarsest run's);
+    contacts rows are (t_start, t_end, delta_max).
     """
-    Er, Ei, Kr, Ki, S = moments(omega, g, 2.0 * H, J + 1, p)
+    Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
+    st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er, Ei, Kr, Ki, S, max_nodes, 0)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
-                                        Er, Ei, Kr, Ki, S, max_nodes, 1)
-    if st != STATUS_OK or st_c != STATUS_OK:
-        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, np.zeros((0, 3)), np.zeros((0, 3))
+                                        Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / SERIES_SAMPLES)
+    if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
+        z = np.zeros((0, 3))
+        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
     fine = contacts(t[:cnt], d[:cnt], fl[:cnt])
     coarse = contacts(tc[:cnt_c], dc[:cnt_c], flc[:cnt_c])
+    coarsest = contacts(tcc[:cnt_cc], dcc[:cnt_cc], flcc[:cnt_cc])
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
-            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse)
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
 
 
 @njit(cache=True)
-def unresolved(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float) -> float:
-    """sum_i s_w[i] min(1, (omega_i H / phase)^6): the bound for modes a base step H does not resolve."""
+def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
+    """Error estimate of x_h from three step sizes H, 2H, 4H: |x_h - x_2h| / (r - 1) with the observed ratio
+    r = |x_2h - x_4h| / |x_h - x_2h| capped at 2^est_order (the assumed order: conservative once the
+    scheme is asymptotic); before it is (r < 2), the larger of the two differences. A ratio above 2^(p+2)
+    (p + 1 = 6 the scheme's order) means x_h and x_2h agree by accident: then d2 / 2^(p + 1), x_2h's error
+    carried down one halving at the scheme's order."""
+    d1 = abs(x_h - x_2h)
+    d2 = abs(x_2h - x_4h)
+    if d1 == 0.0 or d2 > 128.0 * d1:
+        return max(d1, d2 / 64.0)
+    r = d2 / d1
+    if r < 2.0:
+        return max(d1, d2)
+    return d1 / (min(r, 2.0**est_order) - 1.0)
+
+
+@njit(cache=True)
+def unresolved_factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
+    """Measured error factor C of one mode at phase theta = omega H per base step: the value of the first
+    table point >= theta (a step function), ~theta^6 below the table; above it the larger of the last
+    value and c_tab[-1] * sqrt(w) / 4 (the error of a stiff unresolved mode falls like w^-3, not w^-3.5)."""
+    k = 0
+    nt = theta_tab.shape[0]
+    if theta <= theta_tab[0]:
+        x = theta / theta_tab[0]
+        x2 = x * x
+        return c_tab[0] * x2 * x2 * x2
+    while k < nt and theta_tab[k] < theta:
+        k += 1
+    if k < nt:
+        return c_tab[k]
+    return max(c_tab[nt - 1], 0.25 * c_tab[nt - 1] * sqrt_w)
+
+
+@njit(cache=True)
+def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab: np.ndarray,
+               c_tab: np.ndarray) -> float:
+    """sum_i s_w[i] C(omega_i H, w_i): the bound for the error of modes the base step H does not resolve."""
     total = 0.0
     for i in range(omega.shape[0]):
-        x = omega[i] * H / phase
-        x2 = x * x
-        v = x2 * x2 * x2
-        total += s_w[i] * (v if v < 1.0 else 1.0)
+        total += s_w[i] * unresolved_factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab)
     return total
 
 
 @njit(cache=True)
-def largest_step(s_w: np.ndarray, omega: np.ndarray, H: float, phase: float, target: float) -> float:
+def largest_step(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab, c_tab,
+                 target: float) -> float:
     """The largest base step <= H whose unresolved-mode bound is <= target (bisection in log H)."""
-    if unresolved(s_w, omega, H, phase) <= target:
+    if unresolved(s_w, omega, sqrt_w, H, theta_tab, c_tab) <= target:
         return H
     lo = H
-    while unresolved(s_w, omega, lo, phase) > target and lo > 1e-30:
+    while unresolved(s_w, omega, sqrt_w, lo, theta_tab, c_tab) > target and lo > 1e-30:
         lo *= 0.125
     hi = H
     for _ in range(60):
         mid = np.sqrt(lo * hi)
-        if unresolved(s_w, omega, mid, phase) > target:
+        if unresolved(s_w, omega, sqrt_w, mid, theta_tab, c_tab) > target:
             hi = mid
         else:
             lo = mid
@@ -577,49 +676,71 @@ def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
 
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
-               est_order, phase, coeff, smallest_factor):
+               est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25,
+               node_cap=4000000, series_samples=SERIES_SAMPLES):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
     base step count n, index of the node ending the first contact, largest |E/E0 - 1|).
     """
-    # weights of the unresolved-mode bound: coeff s w^-3.5, s = m0 g omega, w = omega delta/v0
+    # weights of the unresolved-mode bound: C(omega H) s w^-3.5, s = m0 g omega, w = omega delta/v0
     nm = omega.shape[0]
     s_w = np.empty(nm)
+    sqrt_w = np.empty(nm)
+    omega_c = np.empty(nm)
+    k_t = 1.5 * alpha * np.sqrt(delta_plate)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
-        s_w[i] = coeff * m0 * g[i] * omega[i] * w ** -3.5
+        s_w[i] = m0 * g[i] * omega[i] * max(w, 1.0) ** -3.5     # a mode below the impact frequency: weight s
+        sqrt_w[i] = np.sqrt(w)
+        # the frequency a mode rings at while the contact spring (tangent stiffness at the rigid-plate peak)
+        # holds it: a light mode (large s) is stiffened far above omega and needs shorter steps
+        omega_c[i] = np.sqrt(omega[i] * omega[i] + k_t * (g[i] * omega[i]))
     n = n0
     if nm > 0:
-        n = t_plate / largest_step(s_w, omega, t_plate / n, phase, tol / 4.0)
-    scale = 1.0 / (2.0**est_order - 1.0)
+        n = t_plate / largest_step(s_w, omega_c, sqrt_w, t_plate / n, theta_tab, c_tab, unresolved_share * tol)
     for _ in range(12):
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
         max_nodes = int(6 * n + 60 * J + 50)
-        if window > 0.0:
-            max_nodes += int(2.5 * window / H)
         for _ in range(6):
-            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window, max_nodes)
+            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, 0.0, max_nodes)
             if out[0] == STATUS_OK:
                 break
             max_nodes *= 4
-        st, cnt, t, d, f, x, u, e, fl, fine, coarse = out
+        st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
         if st != STATUS_OK:
             return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf
         tm_f = fine[0, 1] - fine[0, 0]
         tm_c = coarse[0, 1] - coarse[0, 0]
+        tm_cc = coarsest[0, 1] - coarsest[0, 0]
         dm_f = fine[0, 2]
-        dm_c = coarse[0, 2]
-        fm_f = alpha * dm_f**1.5
-        fm_c = alpha * dm_c**1.5
-        rel = max(abs(tm_f - tm_c) / tm_f, max(abs(fm_f - fm_c) / fm_f, abs(dm_f - dm_c) / dm_f)) * scale
-        rel += unresolved(s_w, omega, H, phase)
+        # relative; f_m = alpha delta_m^1.5 moves 1.5x as much as delta_m
+        rel_t = richardson(tm_f, tm_c, tm_cc, est_order) / tm_f
+        rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
+        rel = max(rel_t, 1.5 * rel_d)
+        rel += unresolved(s_w, omega_c, sqrt_w, H, theta_tab, c_tab)
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
             break
         grow = 1.1 * ratio ** (1.0 / est_order)
         n *= min(max(1.25, grow), 4.0)
+    if window > 0.0:
+        # the window once, at the chosen step (the same tables, so the first contact is the same run's)
+        Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
+        max_nodes = int(6 * n + 60 * J + 50 + 3 * min(series_samples, 1e6) + min(2.5 * window / H, 1e6))
+        while True:
+            max_nodes = min(max_nodes, node_cap)
+            st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window,
+                                                Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / series_samples)
+            if st == STATUS_OK or max_nodes >= node_cap:
+                break
+            max_nodes *= 4
+        if st != STATUS_OK:
+            return st, cnt, t, d, f, x, u, e, fl, fine, rel, n, 0, np.inf
+        t, d, f, x, u, e, fl = t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(), \
+            e[:cnt].copy(), fl[:cnt].copy()
+        fine = contacts(t, d, fl)
     # the first contact's end node (ball velocity there = rebound) and the largest energy drift
     end = 0
     for k in range(cnt):

@@ -44,6 +44,7 @@ from impactval.errors import ImpactvalError
 from impactval.reference.beams import Modes
 from impactval.reference.hertz import C_HERTZ, E0, plate_impact
 from impactval.reference.result import Metrics
+from impactval.reference.validity import perturbation_validity
 
 #: largest scaled mode frequency computed by quadrature; above it, the 1/w^2 asymptotics TH_INF/w^2, MH_INF/w^2
 #: (relative error of those weights < 1e-2 at w = 50, measured; they are themselves < 3e-4 per unit s)
@@ -228,13 +229,16 @@ def mode_weights(modes: Modes, mass: float, alpha: float, v0: float) -> ModeWeig
 @dataclass(frozen=True)
 class PerturbationResult:
     """First-order metrics of a scene: `metrics` (t_m [s], f_m [N], delta_m [m]), the model
-    ("linear", "hertz" or "hertz-sine"), the relative shifts (sum of s_j * weight) and the weights used."""
+    ("linear", "hertz" or "hertz-sine"), the relative shifts (sum of s_j * weight) and the weights used.
+    `validity`: warnings when the shifts leave the first-order range (reference/validity.py); the metrics
+    are NaN when a shift reaches -100 % (no first-order answer)."""
 
     model: str
     metrics: Metrics
     shift_t: float
     shift_delta: float
     weights: ModeWeights
+    validity: tuple[str, ...] = ()
 
 
 def _scene_modes(scene, modes: int | None) -> Modes:
@@ -296,7 +300,10 @@ def perturbation(scene, model: str = "hertz", modes: int | None = None) -> Pertu
         sd = float(np.sum(mw.s * mw.M)) + mw.rho * M_LINEAR_INF
         t0, d0 = math.pi * plate.delta_m / v0, plate.delta_m
         m = Metrics(t0 * (1 + st), plate.k0 * d0 * (1 + sd), d0 * (1 + sd))
-    return PerturbationResult(model, m, st, sd, mw)
+    validity, usable = perturbation_validity(st, sd)
+    if not usable:
+        m = Metrics(math.nan, math.nan, math.nan)
+    return PerturbationResult(model, m, st, sd, mw, validity)
 
 
 def perturbation_curve(scene, model: str = "hertz", modes: int | None = None, n: int = 801):

@@ -23,6 +23,7 @@ from impactval.reference import kernel
 from impactval.reference.beams import Modes, beam_modes
 from impactval.reference.hertz import plate_impact
 from impactval.reference.result import Contact, ImpactResult, Metrics
+from impactval.reference.validity import hertz_validity
 
 #: polynomial degree of the force interpolation (order of the scheme: P_DEGREE + 1)
 P_DEGREE = 5
@@ -136,12 +137,22 @@ def levels(n_steps: float, tol: float) -> int:
     return kernel.levels(float(n_steps), float(tol), SMALLEST_STEP_FACTOR)
 
 
-#: a mode is resolved by the base step H when omega H <= RESOLVED_PHASE
-RESOLVED_PHASE = 2.0
-#: |effect of one mode (dynamic) - its static flexibility| <= UNRESOLVED_COEFF s w^-3.5, relative, on
-#: t_m, f_m, delta_m (s = (m0/m) phi^2, w = omega delta_m/v0); measured ratio <= 2.0 for w = 5..80
-#: (tests/test_convergence.py::test_single_mode_dynamic_effect_bound)
-UNRESOLVED_COEFF = 2.5
+#: Error of one mode the base step H does not resolve that the Richardson estimate misses, relative on t_m,
+#: f_m, delta_m: <= C(omega H) s w^-3.5 (s = (m0/m) phi^2, w = omega delta_m/v0). C is 1.5x the largest such
+#: excess measured for one mode (error - Richardson estimate - the plate's own error, s = 0.01 .. 3,
+#: w = 3 .. 1000, base steps t_plate/12 .. t_plate/600, tol 1e-4 .. 1e-9; checked by
+#: tests/test_convergence.py::test_unresolved_mode_error_table), made non-decreasing in theta: the value
+#: of the first point >= theta, ~theta^6 below the table, above it max(C[-1], C[-1] sqrt(w)/4) (a stiff
+#: mode's raw error falls like w^-3, not w^-3.5). Modes with omega H < ~0.7 are resolved: the Richardson
+#: estimate holds their error.
+UNRESOLVED_THETA = np.array([0.35, 0.5, 0.6, 0.7, 0.8, 1.0, 1.2, 1.5, 1.65, 1.8, 2.0, 2.2, 2.45, 2.7, 3.0, 3.5,
+                             5.0, 20.0])
+UNRESOLVED_C = 1.5 * np.array([1.2e-6, 5.4e-5, 6.8e-4, 1.1e-3, 4.2e-3, 4.2e-3, 1.2e-2, 2.0e-2, 5.4e-2, 0.12, 0.19,
+                               0.36, 0.66, 1.02, 1.72, 2.8, 4.35, 4.5])
+
+#: share of tol the unresolved-mode bound may take when the first base step is chosen (its error falls
+#: like H^3 in aggregate, the Richardson part like H^6: a large share means fewer steps)
+UNRESOLVED_SHARE = 0.5
 
 
 def _rel(u: Metrics, m: Metrics) -> float:
@@ -149,26 +160,67 @@ def _rel(u: Metrics, m: Metrics) -> float:
 
 
 def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float = 1e-6,
-                window: float = 0.0) -> tuple[Run, Metrics]:
+                window: float = 0.0, series_samples: float = kernel.SERIES_SAMPLES) -> tuple[Run, Metrics]:
     """Solve to a relative time-step error estimate <= tol on t_m, f_m, delta_m.
 
     Returns the finer run and its (absolute) time-step uncertainty: the Richardson estimate of the
     fine/coarse pair (order ESTIMATE_ORDER assumed) plus the bound for modes the base step does not
     resolve; the base step shrinks until their sum is <= tol (the loop runs in kernel.solve_auto).
+    In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
+    (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
     plate = plate_impact(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
-    # the base step is then shortened until modes it does not resolve stay within tol / 4 (in the kernel)
+    # the base step is then shortened until modes it does not resolve stay within UNRESOLVED_SHARE tol (kernel)
     n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
+    check_window(window, plate.t_m, tol)
     st, cnt, t, d, f, x, u, e, flags, fine, rel, n, end, drift = kernel.solve_auto(
         omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
-        P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, RESOLVED_PHASE, UNRESOLVED_COEFF, SMALLEST_STEP_FACTOR)
-    if st != kernel.STATUS_OK:  # pragma: no cover - would need a pathological scene
-        raise ImpactvalError("reference solver did not finish the contact")
+        P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, UNRESOLVED_THETA, UNRESOLVED_C, SMALLEST_STEP_FACTOR,
+        UNRESOLVED_SHARE, node_cap(len(omega)), float(series_samples))
+    if st != kernel.STATUS_OK:
+        if window > 0.0 and cnt > 0 and t[cnt - 1] > 0.0:
+            _refuse_window(window, float(t[cnt - 1]), int(cnt), len(omega))
+        raise ImpactvalError("reference solver did not finish the contact")  # pragma: no cover
     run = _make_run(alpha, t, d, f, x, u, e, fine, end, drift)
     m = run.metrics
     return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+
+
+#: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
+#: (work ~ nodes x modes; 4e9 ~ 10-30 s on one core)
+NODE_CAP, MODE_STEP_CAP = 4_000_000, 4e9
+#: bytes and (measured, one core) seconds per node and mode, for the estimate in a refusal
+_BYTES_PER_NODE, _S_PER_MODE_STEP = 49.0, 3e-9
+
+
+def node_cap(n_modes: int) -> int:
+    """The node budget of a windowed run with `n_modes` modes (memory and time bounded)."""
+    return int(max(100_000, min(NODE_CAP, MODE_STEP_CAP / max(n_modes, 1))))
+
+
+def check_window(window: float, t_plate: float, tol: float) -> None:
+    """Refuse up front a window whose end time double precision cannot resolve at the contact's smallest
+    step (~(SMALLEST_STEP_FACTOR tol)^0.4 t_plate): node times there would be off by more than 1e-3 step."""
+    smallest = (SMALLEST_STEP_FACTOR * tol) ** 0.4 * t_plate
+    limit = 1e-3 * smallest / np.finfo(float).eps
+    if window > limit:
+        raise ImpactvalError(
+            f"window {window:g} s is too long for this scene: at its end double-precision time resolves only "
+            f"{window * np.finfo(float).eps:.1g} s, coarser than the contact needs ({1e-3 * smallest:.1g} s); "
+            f"use a window of at most {limit:.3g} s (--window).")
+
+
+def _refuse_window(window: float, t_reached: float, nodes: int, n_modes: int) -> None:
+    """The windowed run hit its node budget: refuse with the estimate for the whole window."""
+    est = nodes * (window / t_reached)
+    fits = min(t_reached, window)
+    raise ImpactvalError(
+        f"window {window:g} s needs about {est:.2g} steps (~{est * _BYTES_PER_NODE / 1e9:.2g} GB, "
+        f"~{est * max(n_modes, 1) * _S_PER_MODE_STEP:.2g} s): the ball stays within reach of the structure; "
+        f"the budget of {nodes} steps covered {t_reached:.3g} s; use a window of at most {0.9 * fits:.3g} s "
+        f"(--window).")
 
 
 def _check_tol(tol: float) -> float:
@@ -187,7 +239,7 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         From :func:`impactval.load_scene`.
     tol : float
         Relative tolerance (1e-12 .. 0.1) for the time step and, with an automatic mode count, for
-        modal truncation (each gets half).
+        modal truncation (their sum <= tol).
     window : float
         Time [s] to keep integrating after the first contact ends (re-contacts).
     modes : int, optional
@@ -196,8 +248,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     static_correction : bool
         With an automatic mode count, add the residual static flexibility of the dropped modes.
     """
+    if not (hasattr(scene, "ball") and hasattr(scene, "target")):
+        hint = f" (call impactval.solve(impactval.load_scene({scene!r})))" if isinstance(scene, str) else ""
+        raise ImpactvalError(f"solve() needs a Scene from impactval.load_scene(), got {type(scene).__name__} "
+                             f"{scene!r:.60}{hint}.")
     tol = _check_tol(tol)
-    if not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
+    if isinstance(window, bool) or not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
         raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
     if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
         raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
@@ -220,8 +276,18 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         run, unc = solve_modes(md, mass, alpha, v0, tol, window)
         n_modes = md.n
     m = run.metrics
+    values = (m.t_m, m.f_m, m.delta_m, unc.t_m, unc.f_m, unc.delta_m, run.rebound_velocity)
+    if not all(math.isfinite(v) for v in values) or min(m.t_m, m.f_m, m.delta_m) <= 0.0:
+        raise ImpactvalError(f"scene {scene.name!r}: the reference solver got a non-finite or non-positive answer "
+                             f"(t_m={m.t_m!r}, f_m={m.f_m!r}, delta_m={m.delta_m!r}): an input is outside the range "
+                             f"double precision can carry (check the ball's and target's sizes, masses and "
+                             f"frequencies).")
+    validity = hertz_validity(scene, m.f_m, m.delta_m)
+    if _rel(unc, m) > tol * (1 + 1e-9):
+        validity += (f"uncertainty {_rel(unc, m):.2g} (relative) is above tol {tol:g}: the mode count or step "
+                     f"reached its limit",)
     return ImpactResult(
-        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m,
+        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m, validity=validity,
         uncertainty=unc, modes=n_modes, t=run.t, f=run.f, delta=run.delta, x_ball=run.x_ball,
         x_structure=run.x_ball - run.delta, energy=run.energy, rebound_velocity=run.rebound_velocity,
         energy_error=run.energy_error, contacts=run.contacts,
@@ -230,20 +296,32 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     )
 
 
+#: the n-mode truncation error is at most this times the n/2n difference (error falls at least like n^-3)
+TRUNCATION_FACTOR = 8.0 / 7.0
+
+
 def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
-    """Double the mode count until n and 2n modes (each with the residual flexibility) agree to tol/2."""
+    """Double the mode count until the n-mode model's time-step uncertainty (each run at tol/4) plus its
+    truncation uncertainty (from the n and 2n models, each with the residual flexibility) is <= tol."""
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     n = initial_mode_count(scene)
     prev = None
     while True:
         md = structure_modes(scene, n, residual=residual)
-        run, unc = solve_modes(md, mass, alpha, v0, tol / 2.0, window)
+        run, unc = solve_modes(md, mass, alpha, v0, tol / 4.0)
         if prev is not None:
             p_run, p_unc, p_n = prev
             a, b = p_run.metrics, run.metrics
-            trunc = Metrics(abs(a.t_m - b.t_m), abs(a.f_m - b.f_m), abs(a.delta_m - b.delta_m))
-            if _rel(trunc, a) <= tol / 2.0 or n >= 20000:
+            # the n-mode model's truncation error: the n/2n difference, plus what the 2n run's own time step
+            # may hide in it, times 8/7 (with the residual flexibility the error falls at least like n^-3)
+            k = TRUNCATION_FACTOR
+            trunc = Metrics(k * (abs(a.t_m - b.t_m) + unc.t_m), k * (abs(a.f_m - b.f_m) + unc.f_m),
+                            k * (abs(a.delta_m - b.delta_m) + unc.delta_m))
+            if _rel(trunc, a) + _rel(p_unc, a) <= tol or n >= 20000:
+                if window > 0.0:       # the same n-mode run again, on through the window
+                    p_run, _ = solve_modes(structure_modes(scene, p_n, residual=residual), mass, alpha, v0,
+                                           tol / 4.0, window)
                 return p_run, p_unc, p_n, trunc
         prev = (run, unc, n)
         n *= 2

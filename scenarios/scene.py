@@ -33,7 +33,7 @@ TOML format (public, names fixed)::
     width = 0.3                        # plate: y side, m
     thickness = 0.005                  # plate: m
     impact_at = [0.5, 0.5]             # plate: [x, y] fractions of length and width
-    [materials.NAME]                   # optional: add or override materials
+    [materials.NAME]                   # optional: add or override materials (young, poisson, density, yield_stress)
     young = 2.1e11
     poisson = 0.3
     density = 7800
@@ -234,13 +234,15 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
         raise SceneError(f"{src}: [materials] must be a table of [materials.NAME] tables.")
     for name, table in extra.items():
         sect = f"materials.{name}"
-        _check_keys(src, sect, table, {"young", "poisson", "density"}, {"source"})
+        _check_keys(src, sect, table, {"young", "poisson", "density"}, {"yield_stress", "source"})
         nu = table["poisson"]
         if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
             raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
+        y = table.get("yield_stress")
         mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
                               _positive(src, sect, "density", table["density"], "kg/m^3"),
-                              str(table.get("source", f"[materials.{name}] in {src}")))
+                              None if y is None else _positive(src, sect, "yield_stress", y, "Pa"),
+                              source=str(table.get("source", f"[materials.{name}] in {src}")))
     return mats
 
 

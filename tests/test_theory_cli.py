@@ -27,7 +27,7 @@ def test_reference_model_perturbation_and_explain():
     assert out.returncode == 0, out.stderr
     assert "hertz-first-order" in out.stdout
     assert "rigid plate enough at tol 0.001: yes" in out.stdout
-    assert "modes needed:" in out.stdout
+    assert "modes needed (first-order weights" in out.stdout and "modes the solve used at tol 0.001:" in out.stdout
 
 
 def test_reference_explain_default_model():

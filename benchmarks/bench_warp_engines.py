@@ -1,0 +1,62 @@
+"""MuJoCo Warp and Newton next to MuJoCo C, in one process, side by side (issue 19).
+
+Prints for the plate and the worked beam: errors vs the exact theory (closed-form sine / linear
+theory for native contact, the Hertz reference for injected Hertz), the C-vs-Warp differences,
+build time (model + first step = kernel compile or cache load) apart from stepping time, and per-step
+cost with Warp CPU graph capture against plain kernel launches (ratios taken in the same run; the
+machine may be loaded, so compare within a run). Also the float32 caveat: plate native at dt down
+to 5e-8 for C and Warp. Several minutes; not a test.
+
+Run: python benchmarks/bench_warp_engines.py
+"""
+from __future__ import annotations
+
+import impactval
+from impactval.engines.base import EngineSettings, load_adapter
+from impactval.reference.linear import solve_linear
+
+
+def line(engine: str, scene_name: str, **kw) -> None:
+    sc = impactval.load_scene(scene_name)
+    s = EngineSettings(**kw)
+    r = load_adapter(engine).run(sc, s)
+    label = f"{engine:12s} {scene_name:16s} {s.contact:7s} {s.integrator or '-':13s} dt={s.dt:<7g} " \
+            f"{dict(s.options) or ''}"
+    if not r.success:
+        print(f"{label} {r.status}: {r.message}", flush=True)
+        return
+    ref = impactval.solve(sc) if s.contact == "hertz" else solve_linear(sc, stiffness=r.diagnostics["contact_stiffness"])
+    err = [100 * (a / b - 1) for a, b in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m))]
+    vs = r.diagnostics.get("vs_mujoco_c", {})
+    vs_txt = " vs C %+.4f/%+.4f/%+.4f %%" % tuple(100 * vs[k] for k in ("t_m", "f_m", "delta_m")) if "t_m" in vs else ""
+    print(f"{label} {r.model}: err {err[0]:+.3f}/{err[1]:+.3f}/{err[2]:+.3f} % (t_m/f_m/delta_m vs "
+          f"{'Hertz' if s.contact == 'hertz' else 'linear'} theory), energy {100 * r.energy_error:.2f} %, "
+          f"build {r.wall_time_build_s:.2f} s (compile/load {r.diagnostics.get('compile_s', 0):.2f} s), "
+          f"step {1e6 * r.wall_time_step_s / max(r.n_steps, 1):.1f} us x {r.n_steps}{vs_txt}", flush=True)
+
+
+def main() -> None:
+    for contact in ("native", "hertz"):
+        line("mujoco", "plate_steel", dt=1e-6, contact=contact)
+        line("mujoco-warp", "plate_steel", dt=1e-6, contact=contact)
+        line("mujoco-warp", "plate_steel", dt=1e-6, contact=contact, options=(("graph_capture", False),))
+        line("newton", "plate_steel", dt=1e-6, contact=contact)
+        line("newton", "plate_steel", dt=1e-6, contact=contact, options=(("graph_capture", False),))
+    for integ in ("featherstone", "xpbd"):
+        line("newton", "plate_steel", dt=1e-6, contact="native", integrator=integ)
+    for dt in (2.5e-7, 1e-7, 5e-8):          # float32: the step's displacement nears the position's rounding
+        line("mujoco", "plate_steel", dt=dt, contact="native")
+        line("mujoco-warp", "plate_steel", dt=dt, contact="native", options=(("compare_c", False),))
+        line("newton", "plate_steel", dt=dt, contact="native")
+    for contact in ("native", "hertz"):
+        line("mujoco", "beam_ss_midspan", dt=1e-6, contact=contact, segments=51,
+             options=(("rotary_inertia", "section"),))          # the chain mujoco-warp builds
+        line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact=contact)
+        line("newton", "beam_ss_midspan", dt=1e-6, contact=contact)
+    line("newton", "beam_ss_midspan", dt=1e-6, contact="native", options=(("attach_ke", 3e9),))
+    line("newton", "beam_ss_midspan", dt=1e-6, contact="native", integrator="xpbd")
+    line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact="hertz", segments=81)
+
+
+if __name__ == "__main__":
+    main()

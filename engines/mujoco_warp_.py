@@ -1,0 +1,323 @@
+"""MuJoCo Warp adapter: the MuJoCo adapter's model (same MJCF, same solref/solimp, built by
+`MujocoAdapter.build`) put on Warp with `mujoco_warp.put_model` and stepped with `mjw.step` on the
+CPU in float32, one step captured as a Warp CPU graph and replayed.
+
+Contact modes:
+
+- "hertz": collision off; a `mjw.Callback(passive=...)` Warp kernel adds alpha*max(delta,0)^1.5 to
+  `qfrc_passive` (J^T f at the ball's tip and, opposite, at the target's hit point, from the
+  current kinematics, so RK4 stages see their own state). MuJoCo C's `mjcb_passive` is ignored by
+  `mjw.step`, hence the kernel;
+- "native": the MuJoCo adapter's linear, undamped contact pair of stiffness k0 (direct solref,
+  impedance 1e-4, see engines/mujoco_.py);
+- "native-hertz": the MuJoCo adapter's fitted solimp shape (the fit runs in MuJoCo C).
+
+Model differences forced by float32 (measured, docs/mujoco-warp.md): the chain is capped at
+MAX_SEGMENTS = 51 and uses the section rotary inertia by default; `diagexact` is off (unsupported),
+the contact's direct solref rescaled to keep k0; connect anchors re-rounded to float32 kinematics.
+The C comparison uses the same model. Modal targets are not offered.
+
+Sampling: after each step a kernel stores the sample at the step's start (kinematics, constraint
+force and energy that `mjw.step` computed for it) and the new qpos/qvel, so no extra forward pass
+runs (RK4: an extra `mjw.forward` after the step, whose state is sampled, since RK4's last
+evaluation is its fourth stage). The series ends by the base's window rule. Kinetic energy uses the mean of the velocities around a sample with the mass matrix of the
+initial configuration (Euler/implicitfast store half-step velocities; the chain moves by micrometres,
+so M(q) is constant to ~1e-7); RK4 uses the engine's own energy.
+
+"C vs Warp": unless option `compare_c` is false, the identical MuJoCo model also runs in MuJoCo C
+(float64) with the same settings, and `diagnostics["vs_mujoco_c"]` holds the signed relative
+differences (Warp - C)/C of t_m, f_m and delta_m (plus the C values), so float32 and the Warp
+solver are told apart from the physics error.
+
+Timing: `wall_time_build_s` includes building the model and the first step, which compiles the
+Warp kernels (14-18 s cold on an idle machine, 0.02-2 s from the cache, see engines/_warp.py);
+`diagnostics["compile_s"]` holds that first step alone. `wall_time_step_s` is the captured stepping.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from impactval.engines.base import WINDOW_CAP, EngineAdapter, EngineSettings, Plan, Simulation, plate_times
+from impactval.engines.mujoco_ import INTEGRATORS, MujocoAdapter, MujocoOptions, default_segments
+from impactval.engines.options import boolean, one_of, option
+from impactval.errors import EngineError
+
+#: most chain segments the automatic sizing may choose. MuJoCo's sizing asks for more (93 on the
+#: worked beam), but the chain's joint-space mass matrix has cond(M) = 4.7e7 at N = 81 (1.3e7 at 51,
+#: 7.9e6 at 41), so mujoco_warp's float32 factorisation returns M^-1 f with 57 % error at N = 81 (1 %
+#: at 41) and the first loaded step is NaN at any dt; N = 53-61 grow energy at dt = 1e-6; N = 51 runs
+#: and matches MuJoCo C within 0.1 %. A larger settings.segments is built as asked (and may fail).
+MAX_SEGMENTS = 51
+#: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
+CHUNK = 64
+#: largest number of contacts / constraint rows the Warp data holds (one contact pair, supports)
+NCONMAX, NJMAX = 8, 32
+
+
+@dataclass(frozen=True)
+class MujocoWarpOptions(MujocoOptions):
+    """`--option mujoco-warp.KEY=VALUE`: the MuJoCo adapter's options (same model) plus these."""
+
+    rotary_inertia: str = option("section", "segment rotary inertia: 'section' = m (l^2 + h^2)/12 (default here: the "
+                                 "better-conditioned chain float32 can solve), 'none' = m l^2/12 (MuJoCo's default; "
+                                 "in float32 +1.7 % f_m vs C and 3.5 % energy error at N = 51)",
+                                 one_of("none", "section"))
+    compare_c: bool = option(True, "also run the identical model in MuJoCo C and report diagnostics['vs_mujoco_c'] "
+                             "(default true)", boolean)
+    graph_capture: bool = option(True, "replay one captured step as a Warp CPU graph (default true; false = plain "
+                                 "kernel launches, ~100x slower)", boolean)
+
+
+class MujocoWarpAdapter(EngineAdapter):
+    """MuJoCo Warp (`pip install 'impactval[mujoco-warp]'`); see the module docstring."""
+
+    name = "mujoco-warp"
+    module = "mujoco_warp"
+    contacts = ("hertz", "native", "native-hertz")
+    integrators = INTEGRATORS
+    Options = MujocoWarpOptions
+
+    def version(self) -> str:
+        from importlib.metadata import version
+
+        return f"{version('mujoco-warp')} (warp {version('warp-lang')}, float32, cpu)"
+
+    def check_settings(self, settings: EngineSettings) -> EngineSettings:
+        settings = super().check_settings(settings)
+        if settings.segments is not None and settings.segments < 2:
+            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
+        return settings
+
+    # ------------------------------------------------------------------ the identical model in C
+    def c_settings(self, scene, settings: EngineSettings) -> EngineSettings:
+        """The settings MuJoCo C gets for the identical model: the MuJoCo options only, the chain's
+        segment count fixed (capped at MAX_SEGMENTS when sized automatically)."""
+        opts = settings.options
+        if isinstance(opts, tuple):
+            opts = self.parse(settings).options
+        c_opts = MujocoOptions(**{f.name: getattr(opts, f.name) for f in fields(MujocoOptions)})
+        segments = settings.segments
+        if segments is None and scene.target.kind == "beam":
+            segments = min(default_segments(scene, replace(settings, options=c_opts)), MAX_SEGMENTS)
+        return replace(settings, options=c_opts, segments=segments)
+
+    def plan(self, scene, settings: EngineSettings) -> Plan:
+        """MuJoCo's plan for the identical model (chain, stability limit, model error)."""
+        _check_target(scene)
+        return _SameModelInC().plan(scene, self.c_settings(scene, settings))
+
+    def contact_law(self, scene, settings: EngineSettings):
+        return MujocoAdapter().contact_law(scene, self.c_settings(scene, settings))
+
+    def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
+        """The chain's natural frequencies [rad/s] from MuJoCo C's linearisation of the identical model."""
+        return MujocoAdapter().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
+
+    def simulate(self, scene, settings: EngineSettings) -> Simulation:
+        from impactval.engines._warp import CapturedStep, import_warp, window_end
+
+        _check_target(scene)
+        t0 = time.perf_counter()
+        wp = import_warp()
+        import mujoco
+        import mujoco_warp as mjw
+
+        from impactval.engines import _mjw_kernels as K
+
+        c_settings = self.c_settings(scene, settings)
+        c_model = _SameModelInC()
+        run = c_model.build(scene, c_settings)
+        c_model.close(run)                  # restores MuJoCo C's callbacks; the model and data stay
+        mjm, mjd, lay, probe, info = run.model, run.data, run.lay, run.probe, dict(run.diagnostics)
+        mujoco.mj_forward(mjm, mjd)
+        m = mjw.put_model(mjm)
+        d = mjw.put_data(mjm, mjd, nconmax=NCONMAX, njmax=NJMAX)
+        if mjm.neq:
+            info["pin_anchor_shift"] = _reanchor_connects(wp, mjw, mujoco, mjm, m, d)
+        contact = settings.contact
+        native = contact != "hertz"
+        if contact == "hertz":
+            args = [m.body_rootid, m.body_isdofancestor, d.subtree_com, d.cdof, d.site_xpos, probe.tip,
+                    probe.hit, probe.ball_body, max(probe.hit_body, 0), float(scene.alpha), d.qfrc_passive]
+            nv = mjm.nv
+
+            def passive(m_, d_):
+                wp.launch(K.hertz_passive, dim=nv, inputs=args, device="cpu")
+
+            m.callback = mjw.Callback(passive=passive)
+        plate = plate_times(scene)
+        dt = float(settings.dt)
+        n_max = int(math.ceil((WINDOW_CAP * plate.t_m + settings.tail) / dt)) + 1
+        nq, nv = mjm.nq, mjm.nv
+        samples = wp.zeros((n_max + 2, 5), dtype=float, device="cpu")
+        states = wp.zeros((n_max + 2, nq + nv), dtype=float, device="cpu")
+        counter = wp.zeros(1, dtype=int, device="cpu")
+        states0 = np.concatenate([mjd.qpos, mjd.qvel]).astype(np.float32)
+        rk4 = (settings.integrator or INTEGRATORS[0]) == "RK4"
+        offset = 1 if rk4 else 0
+        rec_args = [d.site_xpos, d.energy, d.qpos, d.qvel, d.nacon, d.contact.efc_address, d.efc.force,
+                    probe.tip, probe.hit, float(lay.top), float(scene.alpha), int(native), nv, nq, offset]
+        if rk4:                              # sample 0 from a forward pass at t = 0
+            mjw.forward(m, d)
+            first = wp.array([-1], dtype=int, device="cpu")
+            wp.launch(K.record, dim=1, inputs=[*rec_args[:-1], 1, first, samples, states], device="cpu")
+        rec_args += [counter, samples, states]
+
+        def one_step():
+            mjw.step(m, d)
+            if rk4:
+                mjw.forward(m, d)
+            wp.launch(K.record, dim=1, inputs=rec_args, device="cpu")
+
+        stepper = CapturedStep(wp, one_step, capture=settings.options.graph_capture)
+        stepper.warm_up()                  # the first real step: compiles or loads the kernels
+        build_s = time.perf_counter() - t0
+
+        step_s, n_steps = 0.0, 1
+        ball_q = probe.ball_qpos
+        chunk = max(CHUNK, int(1.1 * plate.t_m / dt))       # the first chunk covers a rigid-plate contact
+        end = None
+        while n_steps < n_max and end is None:
+            n = min(chunk, n_max - n_steps)
+            ts = time.perf_counter()
+            stepper.run(n)
+            step_s += time.perf_counter() - ts
+            n_steps += n
+            chunk = CHUNK
+            end = window_end(samples.numpy()[:n_steps + offset], settings, scene)
+        n_steps = int(counter.numpy()[0])
+        n_rec = n_steps + offset                       # samples: one per step start (+ the end for RK4)
+        if end is not None:
+            n_rec = min(n_rec, end + 1)                # the window rule: stop at the contact's end + tail
+        s = samples.numpy()[:n_rec].astype(float)
+        st = states.numpy()[:n_steps + 1].astype(float)
+        st[0] = states0
+        t = np.arange(n_rec) * dt
+        qpos, qvel = st[:, :nq], st[:, nq:]
+        x_ball = mjm.qpos0[ball_q] - qpos[:n_rec, ball_q]
+        v_ball = -qvel[:n_rec, probe.ball_dof]
+        energy = self._energy(mujoco, mjm, settings, s, qvel, n_rec, info, scene)
+        diagnostics = dict(info)
+        diagnostics["compile_s"] = stepper.compile_s
+        diagnostics["graph_capture"] = stepper.graph is not None
+        diagnostics["float"] = "float32"
+        if lay.kind == "beam":
+            diagnostics["segments"] = lay.n_segments
+        sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
+                         energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
+                         model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
+                         settings={"integrator": settings.integrator or INTEGRATORS[0],
+                                   "segments": lay.n_segments or None})
+        if contact == "native" and info.get("contact_stiffness"):
+            from impactval.reference.hertz import ContactLaw
+
+            sim.contact_law = ContactLaw.linear(info["contact_stiffness"])
+        if settings.options.compare_c:
+            diagnostics["vs_mujoco_c"] = self._vs_c(scene, c_settings, sim)
+        return sim
+
+    @staticmethod
+    def _energy(mujoco, mjm, settings, s, qvel, n_rec, info, scene) -> np.ndarray:
+        """Ball + structure + contact energy [J] per sample (see the module docstring)."""
+        delta = np.maximum(s[:, 0], 0.0)
+        if settings.contact == "hertz":
+            contact_pe = 0.4 * scene.alpha * delta**2.5
+        elif settings.contact == "native":
+            contact_pe = 0.5 * info["contact_stiffness"] * delta**2
+        else:
+            return np.zeros(0)     # the fitted law's potential is tabulated only by the C adapter
+        if (settings.integrator or INTEGRATORS[0]) == "RK4":
+            ke = s[:, 4]
+        else:
+            d0 = mujoco.MjData(mjm)
+            mujoco.mj_forward(mjm, d0)
+            mass, unit, col = np.zeros((mjm.nv, mjm.nv)), np.zeros(mjm.nv), np.zeros(mjm.nv)
+            for i in range(mjm.nv):            # columns of M(q0) via mj_mulM
+                unit[:] = 0.0
+                unit[i] = 1.0
+                mujoco.mj_mulM(mjm, d0, col, unit)
+                mass[:, i] = col
+            v_mean = 0.5 * (qvel[:n_rec] + qvel[1:n_rec + 1])
+            ke = 0.5 * np.einsum("ki,ij,kj->k", v_mean, mass, v_mean)
+        return s[:, 3] + contact_pe + ke
+
+    def _vs_c(self, scene, c_settings: EngineSettings, sim: Simulation) -> dict:
+        """Run MuJoCo C on the identical model; signed relative differences (Warp - C)/C."""
+        c = _SameModelInC().run(scene, c_settings)
+        if not c.success:
+            return {"status": str(c.status), "message": c.message}
+        warp = self.result_from(scene, c_settings, sim)
+        if not warp.success:
+            return {"status": "warp-" + str(warp.status), "c_t_m": c.t_m, "c_f_m": c.f_m, "c_delta_m": c.delta_m}
+        return {"t_m": warp.t_m / c.t_m - 1.0, "f_m": warp.f_m / c.f_m - 1.0,
+                "delta_m": warp.delta_m / c.delta_m - 1.0,
+                "c_t_m": c.t_m, "c_f_m": c.f_m, "c_delta_m": c.delta_m, "c_version": c.version}
+
+
+class _SameModelInC(MujocoAdapter):
+    """MuJoCo C on the model MuJoCo Warp runs: the MuJoCo adapter's model without `diagexact`
+    (unsupported by mujoco_warp), the contact pair's direct solref rescaled to keep the stiffness k:
+    solref = (-k*A, 0) with A = efc_diagA without diagexact (body_invweight0 sums), the diagonal both engines then use."""
+
+    def build(self, scene, settings: EngineSettings):
+        import mujoco
+
+        run = super().build(scene, settings)
+        if settings.contact == "hertz":
+            return run
+        model, info = run.model, run.diagnostics
+        model.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_DIAGEXACT)
+        a_exact = info["contact_inverse_mass"]
+        a_approx = _contact_diag_approx(mujoco, model)
+        model.pair_solref[0, 0] *= a_approx / a_exact
+        info["contact_inverse_mass"] = a_approx
+        info["contact_inverse_mass_exact"] = a_exact
+        mujoco.mj_forward(model, run.data)
+        return run
+
+
+def _reanchor_connects(wp, mjw, mujoco, mjm, m, d) -> float:
+    """Move each `<connect>`'s world anchor to where float32 kinematics put the body anchor at qpos0.
+
+    The compiler stores the world anchor in float64; mujoco_warp's forward kinematics sums 81 float32
+    segment offsets and lands ~2e-7 m away, which a support constraint of time constant 2 dt turns
+    into a 7 kN kick at t = 0. Returns the largest shift [m] (reported as diagnostics["pin_anchor_shift"])."""
+    mjw.kinematics(m, d)
+    xpos, xmat = d.xpos.numpy()[0].astype(float), d.xmat.numpy()[0].astype(float)
+    eq = m.eq_data.numpy()
+    shift = 0.0
+    for i in range(mjm.neq):
+        if mjm.eq_type[i] != mujoco.mjtEq.mjEQ_CONNECT or mjm.eq_obj2id[i] > 0:
+            continue
+        b = mjm.eq_obj1id[i]
+        world = xpos[b] + xmat[b].reshape(3, 3) @ mjm.eq_data[i, :3]
+        shift = max(shift, float(np.max(np.abs(world - mjm.eq_data[i, 3:6]))))
+        eq[..., i, 3:6] = world
+    m.eq_data.assign(eq)
+    return shift
+
+
+def _contact_diag_approx(mujoco, model) -> float:
+    """MuJoCo's approximate inverse effective mass [1/kg] of the contact row (efc_diagA without diagexact) at first touch."""
+    d = mujoco.MjData(model)
+    jq = model.jnt_qposadr[model.joint("ball_z").id]
+    d.qpos[jq] = model.qpos0[jq] - 1e-9
+    mujoco.mj_forward(model, d)
+    rows = np.flatnonzero(np.asarray(d.efc_type) == mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS)
+    if rows.size != 1:
+        raise EngineError(f"mujoco-warp: expected one contact row at first touch, found {rows.size}.")
+    return float(d.efc_diagA[rows[0]])
+
+
+def _check_target(scene) -> None:
+    if scene.target.kind not in ("rigid-plate", "beam"):
+        raise EngineError(f"mujoco-warp builds a rigid plate or a chain beam, not a {scene.target.kind!r} target "
+                          f"(the Warp sampling reads the hit site of a plate or chain); use mujoco or the reference.")
+
+
+def _model_kind(lay) -> str:
+    return {"plate": "rigid-plate", "modal": f"modal-{lay.n_modes}"}.get(lay.kind, f"hencky-chain-{lay.n_segments}")

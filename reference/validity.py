@@ -1,0 +1,83 @@
+"""Where the models behind a result stop holding: Hertz's assumptions and first-order perturbation range.
+
+Every check returns warning strings (an empty tuple when the result is within the assumptions); they go
+into `ImpactResult.validity` and are printed by `impactval reference`. The numbers are stated here once:
+
+- HERTZ_DELTA_OVER_R: Hertz's theory is a small-strain theory of a contact small against the radius;
+  delta_m / R = (a / R)^2, and beyond a / R ~ 0.1 (delta_m / R = 1 %) the measured force-approach
+  curves leave Hertz's (Johnson, Contact Mechanics, 1985, sec. 4.2; Yoffe 1984).
+- HERTZ_SIZE_FRACTION: the half-space assumption wants the contact radius a = sqrt(R delta_m) small
+  against the target's cross-section (a beam's width and height, a plate's thickness): flagged at 10 %.
+- YIELD_P0_OVER_Y: first yield under a Hertz contact starts below the surface when the peak pressure
+  p0 = 3 f_m / (2 pi a^2) reaches 1.6 Y (von Mises, nu = 0.3; Johnson 1985, sec. 6.2), for a material
+  with a yield stress Y (scenarios/materials.py, or `yield_stress` in a [materials.NAME] table).
+- PERTURBATION_SHIFT_MAX: a first-order result is (1 + shift) times the rigid-plate value with an error
+  O(shift^2): flagged when |shift| > 10 % (error ~ 1 %), refused (NaN) when 1 + shift <= 0.
+"""
+from __future__ import annotations
+
+import math
+
+HERTZ_DELTA_OVER_R = 0.01
+HERTZ_SIZE_FRACTION = 0.10
+YIELD_P0_OVER_Y = 1.6
+PERTURBATION_SHIFT_MAX = 0.10
+
+
+def effective_radius(alpha: float, e_star: float) -> float:
+    """The contact's effective radius R [m] from alpha = (4/3) E* sqrt(R) (ball on a flat face: the
+    ball's radius; two curved bodies: R1 R2 / (R1 + R2))."""
+    return (0.75 * alpha / e_star) ** 2
+
+
+def contact_size(scene, f_m: float, delta_m: float) -> tuple[float, float]:
+    """(contact radius a [m], peak pressure p0 [Pa]) of a Hertz contact at force f_m [N], approach delta_m [m]:
+    a = sqrt(R delta_m), p0 = 3 f_m / (2 pi a^2)."""
+    a = math.sqrt(effective_radius(scene.alpha, scene.e_star) * delta_m)
+    return a, 1.5 * f_m / (math.pi * a * a)
+
+
+def hertz_validity(scene, f_m: float, delta_m: float) -> tuple[str, ...]:
+    """Warnings where a result (peak force f_m [N], peak approach delta_m [m]) leaves Hertz's assumptions."""
+    if not (math.isfinite(f_m) and math.isfinite(delta_m)) or delta_m <= 0.0:
+        return ()
+    out = []
+    radius = effective_radius(scene.alpha, scene.e_star)
+    ratio = delta_m / radius
+    a, p0 = contact_size(scene, f_m, delta_m)
+    if ratio > HERTZ_DELTA_OVER_R:
+        out.append(f"Hertz: delta_m is {100 * ratio:.3g} % of the contact radius of curvature R = {radius:.3g} m "
+                   f"(a/R = {a / radius:.2g}), above the {100 * HERTZ_DELTA_OVER_R:g} % where small-strain "
+                   f"Hertz theory holds")
+    target = scene.target
+    over = [f"{100 * a / size:.3g} % of its {name} {size:.3g} m" for name in ("width", "height", "thickness")
+            if isinstance(size := getattr(target, name, None), (int, float)) and size > 0
+            and a > HERTZ_SIZE_FRACTION * size]
+    if over:
+        out.append(f"Hertz: contact radius a = {a:.3g} m is {' and '.join(over)} (> {100 * HERTZ_SIZE_FRACTION:g} % of "
+                   f"the target's size): the half-space assumption fails")
+    ball_mat, target_mat = scene.ball.material, target.material
+    pairs = [("ball and target", ball_mat)] if ball_mat == target_mat else [("ball", ball_mat), ("target", target_mat)]
+    for who, mat in pairs:
+        y = getattr(mat, "yield_stress", None)
+        if y and p0 > YIELD_P0_OVER_Y * y:
+            out.append(f"yield: peak contact pressure p0 = {p0 / 1e9:.3g} GPa exceeds {YIELD_P0_OVER_Y:g} x the "
+                       f"yield stress of the {who} ({mat.name}, {y / 1e9:.3g} GPa): plastic flow starts at "
+                       f"p0 = {YIELD_P0_OVER_Y:g} Y, so the elastic f_m and rebound are upper bounds")
+    return tuple(out)
+
+
+def perturbation_validity(shift_t: float, shift_delta: float) -> tuple[tuple[str, ...], bool]:
+    """(warnings, usable) for first-order relative shifts of t_m and delta_m (f_m moves 1.5x delta_m's).
+    Not usable when a shift reaches -100 %: the first-order value would be zero or negative."""
+    shifts = {"t_m": shift_t, "delta_m": shift_delta, "f_m": 1.5 * shift_delta}
+    worst = max(shifts, key=lambda k: abs(shifts[k]))
+    if any(1.0 + s <= 0.0 for s in shifts.values()):
+        bad = min(shifts, key=shifts.get)
+        return ((f"perturbation: first-order shift of {bad} is {100 * shifts[bad]:+.3g} % (<= -100 %): the light-"
+                 f"ball expansion does not apply to this scene; use --model nonlinear"),), False
+    if abs(shifts[worst]) > PERTURBATION_SHIFT_MAX:
+        s = shifts[worst]
+        return ((f"perturbation: first-order shift of {worst} is {100 * s:+.3g} % (> {100 * PERTURBATION_SHIFT_MAX:g} "
+                 f"%): its error O(shift^2) ~ {100 * s * s:.2g} %; use --model nonlinear for an exact answer"),), True
+    return (), True

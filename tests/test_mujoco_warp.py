@@ -1,0 +1,123 @@
+"""MuJoCo Warp adapter (issue 19): bars on the worked case, the C-vs-Warp diagnostic, graph capture.
+
+Runs only with `impactval[mujoco-warp]` installed (not part of `[all]`, see docs/mujoco-warp.md).
+Kernel compilation is shared through the Warp cache (engines/_warp.py); each chain size compiles
+its own kernels once (~15 s cold), so beam checks are marked slow.
+"""
+import math
+
+import numpy as np
+import pytest
+
+import impactval
+from conftest import importorskip_mark
+from impactval.engines.base import EngineSettings
+from impactval.errors import EngineError
+
+has_mjw, requires_mjw = importorskip_mark("mujoco_warp")
+pytestmark = [requires_mjw, pytest.mark.skipif(not has_mjw, reason="pip install 'impactval[mujoco-warp]'")]
+
+
+@pytest.fixture(scope="module")
+def adapter():
+    from impactval.engines.mujoco_warp_ import MujocoWarpAdapter
+
+    return MujocoWarpAdapter()
+
+
+@pytest.fixture(scope="module")
+def beam_scene():
+    return impactval.load_scene("beam_ss_midspan")
+
+
+def rel(a, b):
+    return a / b - 1.0
+
+
+def test_plate_native_linear_within_0_1_percent_and_matches_c(adapter, plate_scene, plate):
+    """Bar: native linear contact at k0, dt = 1e-6, vs the closed-form sine within 0.1 %; the C-vs-Warp
+    column is present and small (float32 vs float64 on the identical model)."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="native"))
+    assert r.status == "ok", r.message
+    omega0 = math.sqrt(plate.k0 / plate_scene.ball.mass)
+    assert abs(r.t_m * omega0 / math.pi - 1) <= 1e-3
+    assert abs(r.delta_m * omega0 / plate_scene.ball.velocity - 1) <= 1e-3
+    assert abs(r.f_m / (plate.k0 * plate_scene.ball.velocity / omega0) - 1) <= 1e-3
+    assert r.diagnostics["contact_stiffness"] == pytest.approx(plate.k0)
+    vs = r.diagnostics["vs_mujoco_c"]
+    assert set(vs) >= {"t_m", "f_m", "delta_m"}
+    assert all(abs(vs[k]) < 1e-3 for k in ("t_m", "f_m", "delta_m"))
+    assert "float32" in r.model and "float32" in r.version
+    assert r.diagnostics["graph_capture"] is True
+    assert r.wall_time_build_s >= r.diagnostics["compile_s"] > 0
+
+
+def test_plate_injected_hertz_by_warp_passive_callback(adapter, plate_scene, plate):
+    """The Hertz force comes from the Warp passive kernel (MuJoCo C's mjcb_passive is not used by
+    mjw.step): without it the ball would pass through the plate."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, integrator="RK4", options=(("compare_c", False),)))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, plate.t_m), (r.f_m, plate.f_m), (r.delta_m, plate.delta_m)):
+        assert abs(rel(got, want)) <= 1e-3
+    assert "vs_mujoco_c" not in r.diagnostics
+    assert r.rebound_velocity == pytest.approx(plate_scene.ball.velocity, rel=2e-3)
+
+
+def test_graph_capture_replays_the_same_steps(adapter, plate_scene):
+    """Captured replay and plain kernel launches give the same series (the capture is only a speed-up)."""
+    s = dict(dt=2e-6, contact="native")
+    a = adapter.run(plate_scene, EngineSettings(**s, options=(("compare_c", False),)))
+    b = adapter.run(plate_scene, EngineSettings(**s, options=(("compare_c", False), ("graph_capture", False))))
+    assert a.status == b.status == "ok"
+    assert np.array_equal(a.delta, b.delta) and np.array_equal(a.f, b.f)
+    assert b.diagnostics["graph_capture"] is False
+
+
+def test_bad_option_is_a_one_line_error(adapter):
+    with pytest.raises(EngineError, match="compare_c"):
+        adapter.check_settings(EngineSettings(options=(("compare_c", "maybe"),)))
+
+
+@pytest.mark.slow
+def test_beam_native_linear_within_1_5_percent_and_c_vs_warp(adapter, beam_scene):
+    """Bar: worked beam, native linear k0, default chain (N = 51), dt = 1e-6, vs the linear-theory
+    reference within 1.5 %; Warp vs MuJoCo C on the identical model within 0.2 %."""
+    from impactval.reference.linear import solve_linear
+
+    r = adapter.run(beam_scene, EngineSettings(dt=1e-6, contact="native"))
+    assert r.status == "ok", r.message
+    assert r.diagnostics["segments"] == 51
+    lin = solve_linear(beam_scene, stiffness=r.diagnostics["contact_stiffness"])
+    for got, want in ((r.t_m, lin.t_m), (r.f_m, lin.f_m), (r.delta_m, lin.delta_m)):
+        assert abs(rel(got, want)) <= 0.015
+    vs = r.diagnostics["vs_mujoco_c"]
+    assert all(abs(vs[k]) < 2e-3 for k in ("t_m", "f_m", "delta_m")), vs
+    assert r.diagnostics["pin_anchor_shift"] < 1e-6
+
+
+@pytest.mark.slow
+def test_beam_injected_hertz_matches_c_chain(adapter, beam_scene):
+    """Injected Hertz on the worked beam: the Warp kernel's J^T f on the chain gives MuJoCo C's result
+    on the identical 51-segment model within 0.05 % (the chain model's own error is measured below)."""
+    r = adapter.run(beam_scene, EngineSettings(dt=1e-6))
+    assert r.status == "ok", r.message
+    vs = r.diagnostics["vs_mujoco_c"]
+    assert all(abs(vs[k]) < 5e-4 for k in ("t_m", "f_m", "delta_m")), vs
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="float32 limits the Warp chain to N <= 51 (cond(M) ~ 1e7), and the "
+                   "51-segment chain itself is +1.9 % on f_m (MuJoCo C on it too): the 1.5 % bar is missed")
+def test_beam_injected_hertz_within_1_5_percent(adapter, beam_scene):
+    ref = impactval.solve(beam_scene)
+    r = adapter.run(beam_scene, EngineSettings(dt=1e-6, options=(("compare_c", False),)))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m)):
+        assert abs(rel(got, want)) <= 0.015
+
+
+def test_other_targets_are_skipped_rows_with_a_reason():
+    from impactval.engines.base import execute_job
+
+    r = execute_job("mujoco-warp", impactval.load_scene("modal_two_mode"), EngineSettings())
+    assert r.status == "skipped" and "rigid plate or a chain beam" in r.message

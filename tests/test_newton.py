@@ -1,0 +1,108 @@
+"""Newton adapter (issue 19): bars on the worked case and the solver findings, measured.
+
+Runs only with `impactval[newton]` installed (not part of `[all]`, see docs/newton.md).
+"""
+import math
+
+import pytest
+
+import impactval
+from conftest import has_mujoco, importorskip_mark
+from impactval.engines.base import EngineSettings
+from impactval.errors import EngineError
+
+has_newton, _ = importorskip_mark("newton")
+pytestmark = pytest.mark.skipif(not has_newton, reason="newton not installed: pip install 'impactval[newton]'")
+
+
+@pytest.fixture(scope="module")
+def adapter():
+    from impactval.engines.newton_ import NewtonAdapter
+
+    return NewtonAdapter()
+
+
+def rel(a, b):
+    return a / b - 1.0
+
+
+@pytest.mark.parametrize("integrator", ["semi-implicit", "featherstone"])
+def test_plate_penalty_contact_is_the_linear_spring_k0(adapter, plate_scene, plate, integrator):
+    """Bar: Newton's penalty contact (ke = k0 on both shapes, kd = 0) at dt = 1e-6 vs the closed-form
+    linear sine within 0.1 %."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="native", integrator=integrator))
+    assert r.status == "ok", r.message
+    omega0 = math.sqrt(plate.k0 / plate_scene.ball.mass)
+    assert abs(r.t_m * omega0 / math.pi - 1) <= 1e-3
+    assert abs(r.delta_m * omega0 / plate_scene.ball.velocity - 1) <= 1e-3
+    assert r.rebound_velocity == pytest.approx(plate_scene.ball.velocity, rel=2e-3)
+    assert r.diagnostics["contact_stiffness"] == pytest.approx(plate.k0)
+    assert "float32" in r.model
+
+
+def test_plate_injected_hertz(adapter, plate_scene, plate):
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="hertz"))
+    assert r.status == "ok", r.message
+    for got, want in ((r.t_m, plate.t_m), (r.f_m, plate.f_m), (r.delta_m, plate.delta_m)):
+        assert abs(rel(got, want)) <= 1e-3
+
+
+def test_xpbd_ignores_the_contact_stiffness(adapter, plate_scene, plate):
+    """Finding (a result, not a failure): XPBD resolves the contact positionally; ke = k0 has no effect,
+    the contact lasts a few steps instead of pi/omega0 and the ball barely penetrates."""
+    r = adapter.run(plate_scene, EngineSettings(dt=1e-6, contact="native", integrator="xpbd"))
+    assert r.status == "ok", r.message
+    t_lin = math.pi / math.sqrt(plate.k0 / plate_scene.ball.mass)
+    assert r.t_m < 0.1 * t_lin
+    assert r.delta_m < 0.01 * plate_scene.ball.velocity * t_lin / math.pi
+
+
+def test_featherstone_refuses_a_beam_supported_at_both_ends(adapter):
+    beam = impactval.load_scene("beam_ss_midspan")
+    with pytest.raises(EngineError, match="loop"):
+        adapter.run(beam, EngineSettings(contact="native", integrator="featherstone"))
+
+
+def test_unknown_option_is_a_one_line_error(adapter):
+    with pytest.raises(EngineError, match="attach_ke"):
+        adapter.check_settings(EngineSettings(contact="native", options=(("attach_ke", "stiff"),)))
+    with pytest.raises(EngineError, match="solref"):
+        adapter.check_settings(EngineSettings(contact="native", options=(("solref", 1),)))
+
+
+@pytest.mark.slow
+def test_beam_native_linear_within_1_5_percent(adapter):
+    """Bar: worked beam, penalty contact k0, SemiImplicit chain N = 41, dt = 1e-6, vs the linear-theory
+    reference within 1.5 % (see docs/newton.md: the penalty joints' give offsets part of the chain's
+    stiffening)."""
+    from impactval.reference.linear import solve_linear
+
+    beam = impactval.load_scene("beam_ss_midspan")
+    r = adapter.run(beam, EngineSettings(dt=1e-6, contact="native"))
+    assert r.status == "ok", r.message
+    lin = solve_linear(beam, stiffness=r.diagnostics["contact_stiffness"])
+    for got, want in ((r.t_m, lin.t_m), (r.f_m, lin.f_m), (r.delta_m, lin.delta_m)):
+        assert abs(rel(got, want)) <= 0.015
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not has_mujoco, reason="needs mujoco for the cross-check")
+def test_featherstone_chain_equals_mujoco_chain(adapter):
+    """Cross-check of two engines on the same Hencky chain (cantilever, N = 41, injected Hertz):
+    Newton Featherstone and MuJoCo C agree within 0.05 %."""
+    from impactval.engines.mujoco_ import MujocoAdapter
+
+    sc = impactval.load_scene("beam_cantilever_tip")
+    s = dict(dt=1e-6, contact="hertz", segments=41, options=(("rotary_inertia", "section"),))
+    n = adapter.run(sc, EngineSettings(**s, integrator="featherstone"))
+    m = MujocoAdapter().run(sc, EngineSettings(**s))
+    assert n.status == m.status == "ok", (n.message, m.message)
+    for a, b in ((n.t_m, m.t_m), (n.f_m, m.f_m), (n.delta_m, m.delta_m)):
+        assert abs(rel(a, b)) <= 5e-4
+
+
+def test_other_targets_are_skipped_rows_with_a_reason():
+    from impactval.engines.base import execute_job
+
+    r = execute_job("newton", impactval.load_scene("modal_two_mode"), EngineSettings())
+    assert r.status == "skipped" and "rigid plate or a chain beam" in r.message
