@@ -53,6 +53,7 @@ def main() -> None:
 
 
 main.add_command(__import__("impactval.cli_engines", fromlist=["engines_command"]).engines_command)
+main.add_command(__import__("impactval.cli_sweep").cli_sweep.sweep_command)   # impactval sweep (issue 13)
 
 
 @main.command()
@@ -377,8 +378,8 @@ def _print_rows(df, as_json: bool, text_table) -> None:
         click.echo(json.dumps(clean))
 
 
+main.add_command(__import__("impactval.cli_extremes", fromlist=["extremes"]).extremes)  # issue 14
 __import__("impactval.cli_tune").cli_tune.register(main)    # impactval tune, impactval materials (issue 15)
-
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -702,12 +702,13 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     for _ in range(12):
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
-        max_nodes = int(6 * n + 60 * J + 50)
-        for _ in range(6):
+        cap = node_cap // 4             # the first contact: a quarter of a window's budget
+        max_nodes = min(int(6 * n + 60 * J + 50), cap)
+        while True:
             out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, 0.0, max_nodes)
-            if out[0] == STATUS_OK:
+            if out[0] == STATUS_OK or max_nodes >= cap:
                 break
-            max_nodes *= 4
+            max_nodes = min(4 * max_nodes, cap)
         st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
         if st != STATUS_OK:
             return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf

@@ -89,3 +89,13 @@ def test_absurd_windows_are_refused_before_any_output(window):
     out = CliRunner().invoke(main, ["reference", "heavy_ball_slender_beam", "--window", window])
     assert out.exit_code == 2 and "Traceback" not in out.output
     assert "window" in out.output and "t_m [us]" not in out.output
+
+
+def test_a_structure_far_softer_than_the_contact_is_refused_in_bounded_memory():
+    """A 3.2 kg glass ball at 18.7 m/s on a 0.2 mm cantilever: the first contact would need millions of steps;
+    refused with one line (exit 2), not grown until the machine runs out of memory (it reached 3.9 GB)."""
+    beam = {"kind": "beam", "material": "glass", "support": "cantilever", "length": 0.0139, "width": 1.96e-4,
+            "height": 2.34e-4, "impact_at": 0.0907}
+    scene = _scene(18.7, radius=0.0676, target=beam, material="glass")
+    with pytest.raises(impactval.ImpactvalError, match="first contact needs more than .* steps"):
+        impactval.solve(scene, tol=1e-6)
