@@ -438,6 +438,7 @@ from impactval import cli_nightly as _cli_nightly  # noqa: E402 - commands in th
 main.add_command(_cli_nightly.nightly_command)
 main.add_command(_cli_nightly.report_command)
 
+__import__("impactval.cli_tune").cli_tune.register(main)    # impactval tune, impactval materials (issue 15)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

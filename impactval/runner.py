@@ -491,6 +491,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     """
     if isinstance(engines, str):
         engines = [e.strip() for e in engines.split(",") if e.strip()]
+    if not isinstance(engines, Iterable):
+        raise EngineError(f"engines must be engine names (a list or a comma-separated string), got {engines!r}.")
     specs = [resolve_engine(e) for e in engines]
     if not specs:
         raise EngineError("no engine given; known: " + ", ".join(ENGINES) + ".")

@@ -145,7 +145,12 @@ class Store:
                 cur.execute("PRAGMA synchronous=NORMAL")
                 cur.close()
         self._define(sa)
-        self._create(sa)
+        try:
+            self._create(sa)
+        except sa.exc.OperationalError as err:   # unreachable server, refused login, unwritable file
+            reason = str(getattr(err, "orig", err)).strip().splitlines()[0]
+            raise ImpactvalError(f"--store {where}: cannot open the store ({reason}); check the URL, that the "
+                                 f"server is running and the credentials, or use a local SQLite file path.") from None
 
     # ------------------------------------------------------------------ schema
     def _define(self, sa) -> None:

@@ -235,14 +235,15 @@ def _materials(src: str, doc: Mapping[str, Any]) -> dict[str, Material]:
     for name, table in extra.items():
         limits.check_name(src, "material name", name, "materials")
         sect = f"materials.{name}"
-        _check_keys(src, sect, table, {"young", "poisson", "density"}, {"yield_stress"})
+        _check_keys(src, sect, table, {"young", "poisson", "density"}, {"yield_stress", "source"})
         nu = table["poisson"]
         if isinstance(nu, bool) or not isinstance(nu, (int, float)) or not (-1.0 < nu < 0.5):
             raise SceneError(f"{_where(src, sect)} poisson must be a number in (-1, 0.5), got {nu!r}.")
         y = table.get("yield_stress")
         mats[name] = Material(name, _positive(src, sect, "young", table["young"], "Pa"), float(nu),
                               _positive(src, sect, "density", table["density"], "kg/m^3"),
-                              None if y is None else _positive(src, sect, "yield_stress", y, "Pa"))
+                              None if y is None else _positive(src, sect, "yield_stress", y, "Pa"),
+                              source=str(table.get("source", f"[materials.{name}] in {src}")))
     return mats
 
 

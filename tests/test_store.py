@@ -159,3 +159,24 @@ def test_an_older_results_csv_is_moved_aside_with_a_note(tmp_path):
     assert any("moved to results-old-" in n for n in notes)
     assert pd.read_csv(tmp_path / "results.csv")["job_key"].tolist() == ["k1"]
     assert export(db, tmp_path) == [] and len(list(tmp_path.glob("results-old-*.csv"))) == 1   # ours: kept
+
+
+def test_unreachable_store_is_a_one_line_input_error():
+    """Issue 18: a database that cannot be opened is exit 2 naming --store, not an internal error."""
+    import pytest
+
+    from impactval.errors import ImpactvalError
+    from impactval.store import Store
+
+    with pytest.raises(ImpactvalError, match="--store .*cannot open the store"):
+        Store("postgresql://nobody@127.0.0.1:1/impactval")
+
+
+def test_run_refuses_engines_that_are_not_names():
+    import pytest
+
+    from impactval.errors import ImpactvalError
+    from impactval.runner import run
+
+    with pytest.raises(ImpactvalError, match="engines must be engine names"):
+        run(["plate_steel"], engines=5)

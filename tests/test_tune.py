@@ -1,0 +1,347 @@
+"""Engine parameter tuning (issue 15): closed forms against independent integrations, MuJoCo's force law
+against MuJoCo itself, fits through engine runs, the emitted options and snippet used back."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import impactval
+from impactval import tune as T
+from impactval.errors import ImpactvalError
+from impactval.reference.hertz import plate_impact
+
+from conftest import requires_exudyn, requires_mujoco, run_py
+
+PLATE = impactval.load_scene("plate_steel")
+M, ALPHA = PLATE.ball.mass, PLATE.alpha
+
+
+def _impact_ode(force, mass, v0, t_end):
+    """(t_m, f_m, delta_m) of m x'' = -force(x, x'), x(0) = 0, x'(0) = v0, by DOP853 with an event."""
+    ev = lambda t, y: y[0] if t > 0 else 1.0   # noqa: E731
+    ev.terminal, ev.direction = True, -1
+    sol = solve_ivp(lambda t, y: [y[1], -force(y[0], y[1]) / mass], (0, t_end), [0.0, v0], method="DOP853",
+                    rtol=1e-11, atol=1e-16, events=ev, dense_output=True)
+    t_m = float(sol.t_events[0][0])
+    tt = np.linspace(0, t_m, 20001)
+    y = sol.sol(tt)
+    f = np.array([force(a, b) for a, b in y.T])
+    return t_m, float(f.max()), float(y[0].max()), -float(sol.y_events[0][0][1])
+
+
+# ------------------------------------------------------------------------------------- closed forms
+
+def test_speeds_parse_and_refuse():
+    assert T.parse_speeds("0.1:10:5") == pytest.approx((0.1, 10**-0.5, 1.0, 10**0.5, 10.0))
+    assert T.parse_speeds("1,0.3") == (0.3, 1.0)
+    assert T.middle_speed(T.parse_speeds("0.1:10:5")) == pytest.approx(1.0)
+    for bad in ("0.1:10", "a,b", "0:1:3", "-1", ""):
+        with pytest.raises(ImpactvalError, match="--speeds"):
+            T.parse_speeds(bad)
+
+
+def test_law_plate_quadrature_matches_closed_forms():
+    p = plate_impact(M, ALPHA, 1.0)
+    t_m, f_m, d_m = T.law_plate(lambda x: ALPHA * np.maximum(x, 0) ** 1.5, M, 1.0, 1e-3)
+    assert (t_m / p.t_m - 1, f_m / p.f_m - 1, d_m / p.delta_m - 1) == pytest.approx((0, 0, 0), abs=2e-6)
+    k = 1.3e8
+    got = T.law_plate(lambda x: k * x, M, 2.0, 1e-2)
+    assert np.allclose(got, T.linear_plate(M, k, 2.0), rtol=2e-6)
+
+
+def test_linear_plate_against_ode_and_product_ratio():
+    k, v = 2.0e8, 0.7
+    t_m, f_m, d_m, _ = _impact_ode(lambda x, xd: k * x, M, v, 1e-3)
+    assert np.allclose((t_m, f_m, d_m), T.linear_plate(M, k, v), rtol=1e-6)
+    # no spring matches Hertz's t_m * f_m: pi m v against 2.5 c m v
+    p = plate_impact(M, ALPHA, v)
+    tl, fl, _ = T.linear_plate(M, 7.7e7, v)
+    assert tl * fl / (p.t_m * p.f_m) == pytest.approx(T.LINEAR_PRODUCT_RATIO, rel=1e-12)
+    assert T.LINEAR_PRODUCT_RATIO == pytest.approx(math.pi / (2.5 * 1.471637), rel=1e-6)    # c of physics.md
+
+
+def test_k0_and_matching_springs():
+    p = plate_impact(M, ALPHA, 1.0)
+    k0 = T.k0_energy(M, ALPHA, 1.0)
+    assert T.linear_plate(M, k0, 1.0)[2] == pytest.approx(p.delta_m, rel=1e-12)          # same delta_m (eq. 47-49)
+    ks = T.k_matching(M, p.t_m, p.f_m, 1.0)
+    assert T.linear_plate(M, ks["t_m"], 1.0)[0] == pytest.approx(p.t_m, rel=1e-12)
+    assert T.linear_plate(M, ks["f_m"], 1.0)[1] == pytest.approx(p.f_m, rel=1e-12)
+    tl, fl, _ = T.linear_plate(M, ks["equal"], 1.0)
+    assert tl / p.t_m == pytest.approx(fl / p.f_m, rel=1e-12)
+    assert tl / p.t_m == pytest.approx(math.sqrt(T.LINEAR_PRODUCT_RATIO), rel=1e-12)
+
+
+def test_linear_compromise_is_the_least_squares_minimum():
+    targets = T.hertz_targets(PLATE, (0.1, 1.0, 10.0))
+    k = T.linear_compromise(M, targets)
+
+    def cost(kk):
+        return sum(math.log(T.linear_plate(M, kk, t.speed)[0] / t.t_m) ** 2 +
+                   math.log(T.linear_plate(M, kk, t.speed)[1] / t.f_m) ** 2 for t in targets)
+    assert cost(k) < cost(k * 1.01) and cost(k) < cost(k / 1.01)
+    # the middle of a geometric range is off by the unavoidable -7.6 % in both
+    tl, fl, _ = T.linear_plate(M, k, 1.0)
+    assert tl / targets[1].t_m - 1 == pytest.approx(fl / targets[1].f_m - 1, abs=1e-9)
+    assert tl / targets[1].t_m - 1 == pytest.approx(math.sqrt(T.LINEAR_PRODUCT_RATIO) - 1, abs=1e-9)
+
+
+@pytest.mark.parametrize("e", [0.95, 0.7, 0.3])
+def test_restitution_model_against_integration(e):
+    k = 1.0e8
+    c = T.damping_for(e, k, M)
+    v = 1.0
+    _, _, _, v_out = _impact_ode(lambda x, xd: k * x + c * xd, M, v, 1e-3)
+    assert v_out / v == pytest.approx(e, rel=1e-6)
+    assert T.restitution_of(T.damping_ratio(e)) == pytest.approx(e, rel=1e-12)
+    with pytest.raises(ImpactvalError, match="restitution"):
+        T.damping_ratio(1.5)
+
+
+# ------------------------------------------------------------------------------------- MuJoCo's law
+
+def _plate_model(mujoco, solref, solimp, dt=2e-8, v=1.0):
+    r = PLATE.ball.radius
+    xml = (f'<mujoco><option timestep="{dt}" integrator="Euler" gravity="0 0 0"><flag diagexact="enable"/></option>'
+           f'<worldbody><geom name="plate" type="plane" size="1 1 0.1"/><body name="ball" pos="0 0 {r}">'
+           f'<joint name="z" type="slide" axis="0 0 1"/><inertial pos="0 0 0" mass="{M!r}" diaginertia="1e-6 1e-6 1e-6"/>'
+           f'<geom name="ball" type="sphere" size="{r}" mass="0"/></body></worldbody><contact><pair geom1="ball" '
+           f'geom2="plate" condim="1" solref="{solref[0]!r} {solref[1]!r}" solimp="{" ".join(map(repr, solimp))}"/>'
+           f'</contact></mujoco>')
+    return mujoco.MjModel.from_xml_string(xml)
+
+
+def _static(mujoco, m, pen, vel=0.0):
+    d = mujoco.MjData(m)
+    d.qpos[0], d.qvel[0] = -pen, vel
+    mujoco.mj_forward(m, d)
+    f = np.zeros(6)
+    if d.ncon:
+        mujoco.mj_contactForce(m, d, 0, f)
+    return f[0]
+
+
+@requires_mujoco
+def test_mujoco_force_law_matches_mujoco():
+    import mujoco
+
+    solref, solimp = (-5.9e9, 0.0), (3.8e-4, 1e-3, 6.4e-4, 0.02, 6.0)
+    m = _plate_model(mujoco, solref, solimp)
+    pens = np.geomspace(1e-7, 1e-3, 25)
+    got = np.array([_static(mujoco, m, p) for p in pens])
+    assert np.allclose(got, T.mujoco_force(pens, solref, solimp, M), rtol=1e-9)
+    # direct form with damping and the time-constant form: k and c as stated
+    k, c = 2.0e8, 150.0
+    m = _plate_model(mujoco, T.mujoco_direct_solref(k, c, M), (0.95, 0.95, 0.001, 0.5, 2))
+    assert _static(mujoco, m, 1e-5) == pytest.approx(k * 1e-5, rel=1e-9)
+    assert _static(mujoco, m, 1e-5, -1.0) - _static(mujoco, m, 1e-5) == pytest.approx(c, rel=1e-9)
+    tc, dr = T.mujoco_timeconst_solref(k, 0.2, M)
+    m = _plate_model(mujoco, (tc, dr), (0.95, 0.95, 0.001, 0.5, 2))
+    assert _static(mujoco, m, 1e-5) == pytest.approx(k * 1e-5, rel=1e-9)
+    assert _static(mujoco, m, 1e-5, -1.0) - _static(mujoco, m, 1e-5) == pytest.approx(2 * 0.2 * math.sqrt(k * M),
+                                                                                      rel=1e-9)
+
+
+@requires_mujoco
+def test_effective_mass_from_the_model():
+    got = T.mujoco_effective_mass(PLATE)
+    assert got["m_eff"] == pytest.approx(M, rel=1e-9)       # a ball on a plate: the ball's mass
+    assert got["m_invweight"] == pytest.approx(M, rel=1e-9)
+
+
+# ------------------------------------------------------------------------------------- fits over engine runs
+
+@pytest.fixture(scope="module")
+def mujoco_hertz(tmp_path_factory):
+    pytest.importorskip("mujoco")
+    out = tmp_path_factory.mktemp("tune_mj")
+    tuned = T.tune("mujoco", PLATE, (0.3, 1.0, 3.0), contact="native-hertz", store=str(out / "tune.sqlite"),
+                   workers=2, max_nfev=4)
+    T.write(tuned, out)
+    return tuned, out
+
+
+def test_fit_counts_runs_and_resumes(mujoco_hertz, tmp_path):
+    tuned, out = mujoco_hertz
+    assert tuned.engine_runs >= 2 * 3 and tuned.evaluations >= 2
+    data = json.loads((out / "tuned.json").read_text())
+    assert set(data) >= {"engine", "options", "residuals", "engine_runs"}
+    assert set(data["options"]) == {"mujoco.solref", "mujoco.solimp"}
+    assert [r["speed"] for r in data["residuals"]] == [0.3, 1.0, 3.0]
+    # the same fit again into the same store: every engine job is reused, none run
+    again = T.tune("mujoco", PLATE, (0.3, 1.0, 3.0), contact="native-hertz", store=str(out / "tune.sqlite"),
+                   workers=2, max_nfev=4)
+    assert again.engine_runs == 0 and again.options == tuned.options
+
+
+def test_hertz_shape_fit_on_three_speeds(mujoco_hertz):
+    tuned, _ = mujoco_hertz
+    mid = next(r for r in tuned.residuals if r["speed"] == 1.0)
+    assert abs(mid["err_t_m"]) < 0.02 and abs(mid["err_f_m"]) < 0.02
+    # the engine follows the pure model of its law (discretisation at dt only)
+    solref = [float(x) for x in tuned.options["mujoco.solref"].split(",")]
+    solimp = [float(x) for x in tuned.options["mujoco.solimp"].split(",")]
+    for r in tuned.residuals:
+        t_m, f_m, _ = T.law_plate(lambda x: T.mujoco_force(x, solref, solimp, M), M, r["speed"], 1e-2, 1e-9)
+        assert r["t_m"] == pytest.approx(t_m, rel=1e-3) and r["f_m"] == pytest.approx(f_m, rel=1e-3)
+
+
+def test_emitted_options_through_impactval_run(mujoco_hertz, tmp_path):
+    tuned, _ = mujoco_hertz
+    scene = tmp_path / "plate_1.toml"
+    scene.write_text('[ball]\nradius = 0.01\nvelocity = 1.0\nmaterial = "steel"\n[target]\nkind = "rigid-plate"\n'
+                     'material = "steel"\n')
+    cmd = [sys.executable, "-m", "impactval.cli", "run", str(scene), "--engines", "mujoco", "--contact", "native",
+           "--dt", f"{tuned.dt:g}", "--json", "--out", str(tmp_path / "run"), *T.option_args(tuned.options)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    row = json.loads(proc.stdout.strip().splitlines()[-1])
+    mid = next(r for r in tuned.residuals if r["speed"] == 1.0)
+    assert row["t_m"] == pytest.approx(mid["t_m"], rel=1e-9) and row["f_m"] == pytest.approx(mid["f_m"], rel=1e-9)
+
+
+def test_mjcf_snippet_in_plain_mujoco(mujoco_hertz):
+    """The emitted MJCF pasted into a minimal model of the same ball (free joint) and plate, stepped with plain
+    mujoco, gives the tuned t_m and f_m within 0.1 %."""
+    import mujoco
+
+    from impactval.reports.tune import mujoco_snippet
+
+    tuned, _ = mujoco_hertz
+    snip = mujoco_snippet(tuned.as_json()).replace("BALL", "ball").replace("TARGET", "plate")
+    r, v = PLATE.ball.radius, 1.0
+    xml = (f'<mujoco>{snip}<option gravity="0 0 0"/><worldbody><geom name="plate" type="plane" size="1 1 0.1"/>'
+           f'<body name="b" pos="0 0 {r!r}"><freejoint/><geom name="ball" type="sphere" size="{r!r}" '
+           f'mass="{M!r}"/></body></worldbody></mujoco>')
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    d.qvel[2] = -v
+    f6 = np.zeros(6)
+    pens, forces = [], []
+    for _ in range(200000):
+        pen = r - d.qpos[2]
+        mujoco.mj_step(m, d)               # the contact force of this step is computed at its start state
+        f = 0.0
+        for i in range(d.ncon):
+            mujoco.mj_contactForce(m, d, i, f6)
+            f += f6[0]
+        pens.append(pen)
+        forces.append(f)
+        if len(pens) > 10 and pen <= 0:
+            break
+    pens, forces = np.array(pens), np.array(forces)
+    k = len(pens) - 1                       # first sample with pen <= 0 after the contact
+    t_end = (k - 1 + pens[k - 1] / (pens[k - 1] - pens[k])) * m.opt.timestep
+    mid = next(x for x in tuned.residuals if x["speed"] == 1.0)
+    assert t_end == pytest.approx(mid["t_m"], rel=1e-3)
+    assert forces.max() == pytest.approx(mid["f_m"], rel=1e-3)
+
+
+@requires_exudyn
+def test_exudyn_recovers_alpha(tmp_path):
+    """Exponent 1.5: the least-squares fit over Exudyn runs, started 30 % off, recovers alpha to 1e-3."""
+    tuned = T.tune("exudyn", PLATE, (0.3, 3.0), contact="native-hertz", start=0.7 * ALPHA,
+                   store=str(tmp_path / "t.sqlite"), workers=2)
+    assert tuned.options["exudyn.contact_exponent"] == 1.5
+    assert abs(tuned.options["exudyn.contact_stiffness"] / ALPHA - 1) < 1e-3
+    assert tuned.engine_runs > 2
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_linear_fit_is_the_spring_it_claims(engine, tmp_path):
+    """A linear tune: the engine's impacts are those of the spring k the options encode (pi sqrt(m/k),
+    v sqrt(k m), independent closed form), and that spring is near the log-least-squares compromise."""
+    pytest.importorskip(engine)
+    speeds = (0.5, 2.0)
+    tuned = T.tune(engine, PLATE, speeds, store=str(tmp_path / "t.sqlite"), workers=2, max_nfev=3)
+    k = tuned.parameters["k"]
+    if engine == "mujoco":
+        assert k == pytest.approx(-float(tuned.options["mujoco.solref"].split(",")[0]) * M, rel=1e-9)
+    else:
+        assert k == pytest.approx(tuned.options["pybullet.erp"] / (tuned.options["pybullet.cfm"] * tuned.dt), rel=1e-9)
+    for r in tuned.residuals:
+        t_m, f_m, d_m = T.linear_plate(M, k, r["speed"])
+        assert (r["t_m"], r["f_m"], r["delta_m"]) == pytest.approx((t_m, f_m, d_m), rel=1e-3)
+    k_closed = T.linear_compromise(M, T.hertz_targets(PLATE, speeds))
+    assert k == pytest.approx(k_closed, rel=0.1)
+    assert tuned.before_residuals and tuned.engine_runs >= 2 * len(speeds)
+
+
+@pytest.mark.slow
+@requires_mujoco
+def test_bar_mujoco_plate_range(tmp_path):
+    """The issue's bar: MuJoCo plate 0.1-10 m/s, native-hertz fit; the emitted options passed back through
+    `impactval run --contact native --option ...` give t_m, f_m within 2 % of Hertz at the middle speed."""
+    out = tmp_path / "tune"
+    proc = subprocess.run([sys.executable, "-m", "impactval.cli", "tune", "mujoco", "plate_steel", "--contact",
+                           "native-hertz", "--speeds", "0.1:10:5", "--out", str(out), "--no-plot"],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((out / "tuned.json").read_text())
+    assert len(data["residuals"]) == 5 and all(math.isfinite(r["err_t_m"]) for r in data["residuals"])
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--contact", "native",
+           "--dt", f"{data['dt']:g}", "--json", "--out", str(tmp_path / "run"), *T.option_args(data["options"])]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    row = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert abs(row["err_t_m"]) < 0.02 and abs(row["err_f_m"]) < 0.02
+
+
+# ------------------------------------------------------------------------------------- CLI
+
+def _cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "impactval.cli", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_materials_lists_sources(tmp_path):
+    proc = _cli("materials")
+    assert proc.returncode == 0
+    assert "steel" in proc.stdout and "ASM Aerospace Specification Metals" in proc.stdout
+    scene = tmp_path / "s.toml"
+    scene.write_text('[ball]\nradius = 0.01\nvelocity = 1.0\nmaterial = "mine"\n[target]\nkind = "rigid-plate"\n'
+                     'material = "steel"\n[materials.mine]\nyoung = 2e11\npoisson = 0.29\ndensity = 7850\n'
+                     'source = "mill certificate 42"\n')
+    proc = _cli("materials", str(scene))
+    assert proc.returncode == 0 and "mill certificate 42" in proc.stdout
+    # the source is not part of the scene's identity
+    a = impactval.load_scene(str(scene))
+    scene.write_text(scene.read_text().replace("mill certificate 42", "other"))
+    assert impactval.load_scene(str(scene)).ball == a.ball
+
+
+def test_tune_modules_import_no_engine():
+    code = ("import impactval.tune, impactval.reports.tune, impactval.cli_tune, impactval.cli, sys; "
+            "print(sorted({'mujoco', 'pybullet', 'exudyn', 'matplotlib'} & set(sys.modules)) or '')")
+    assert run_py(code) == ""
+
+
+@requires_mujoco
+def test_tune_command_writes_json_report_plot(tmp_path):
+    out = tmp_path / "t"
+    proc = _cli("tune", "mujoco", "plate_steel", "--speeds", "0.5,2", "--max-evals", "2", "--out", str(out),
+                "--restitution", "0.8")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((out / "tuned.json").read_text())
+    assert data["engine"] == "mujoco" and data["engine_runs"] >= 4
+    assert "--option mujoco.solref=" in proc.stdout
+    md = (out / "tune.md").read_text()
+    assert '<pair geom1="BALL" geom2="TARGET"' in md and "| 0.8 |" in md and "m_eff" in md
+    pytest.importorskip("matplotlib")
+    assert (out / "tune_force.png").stat().st_size > 10_000
+
+
+def test_tune_bad_input_is_one_line_exit_2():
+    for args in (["tune", "mujuco", "plate_steel"], ["tune", "mujoco", "plate_steel", "--speeds", "1:2"],
+                 ["tune", "pybullet", "plate_steel", "--contact", "native-hertz"],
+                 ["tune", "mujoco", "plate_steel", "--restitution", "2"]):
+        proc = _cli(*args)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.strip().splitlines()[-1].startswith("impactval: error:")
+        assert "Traceback" not in proc.stderr
