@@ -95,9 +95,9 @@ def middle_speed(speeds: Sequence[float]) -> float:
 
 
 def at_speed(scene, speed: float):
-    """The scene with approach speed `speed` [m/s], named "NAME@v=SPEED"."""
+    """The scene with approach speed `speed` [m/s], named "NAME[v=SPEED]"."""
     ball = dataclasses.replace(scene.ball, velocity=float(speed))
-    return dataclasses.replace(scene, name=f"{scene.name}@v={speed:g}", ball=ball)
+    return dataclasses.replace(scene, name=f"{scene.name}[v={speed:g}]", ball=ball)
 
 
 def default_dt(scene, speeds: Sequence[float]) -> float:
