@@ -114,20 +114,21 @@ def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
     """A results.csv written by `impactval run`; an older schema is refused with a message."""
     p = Path(path)
     if not p.is_file():
-        raise ImpactvalError(f"{p}: baseline file does not exist (give a results.csv of an earlier run).")
+        raise ImpactvalError(f"--baseline {p}: file does not exist (give the results.csv of an earlier run).")
     try:
         df = pd.read_csv(p, keep_default_na=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise ImpactvalError(f"{p}: not a results.csv ({err}).") from None
+        raise ImpactvalError(f"--baseline {p}: not a results.csv of impactval run ({err}); give the "
+                             f"results.csv an earlier run wrote.") from None
     for col in ("err_t_m", "err_f_m", "err_delta_m", "err_curve"):     # schema 3 exports errors in % as NAME_pct
         if col not in df and f"{col}_pct" in df:
             df[col] = pd.to_numeric(df[f"{col}_pct"], errors="coerce") / 100.0
     missing = [c for c in (*KEY, "status", "schema_version", "err_t_m", "err_f_m", "err_delta_m") if c not in df]
     if missing:
-        raise ImpactvalError(f"{p}: not a results.csv of impactval run (missing column {missing[0]!r}).")
+        raise ImpactvalError(f"--baseline {p}: not a results.csv of impactval run (missing column {missing[0]!r}).")
     versions = set(pd.to_numeric(df["schema_version"], errors="coerce").dropna().astype(int))
     if versions != {schema_version}:
-        raise ImpactvalError(f"{p}: results schema {sorted(versions)} cannot be compared with schema "
+        raise ImpactvalError(f"--baseline {p}: results schema {sorted(versions)} cannot be compared with schema "
                              f"{schema_version}; rerun the baseline with this impactval version.")
     # several runs appended to one file: the newest row per key is the baseline
     return df.drop_duplicates(list(KEY), keep="last")

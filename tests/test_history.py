@@ -52,6 +52,10 @@ def test_bad_baseline_files(tmp_path):
     q.write_text("a,b\n1,2\n")
     with pytest.raises(ImpactvalError, match="missing column"):
         load_results(q, 2)
+    b = tmp_path / "binary.csv"
+    b.write_bytes(bytes(range(256)) * 8)
+    with pytest.raises(ImpactvalError, match="^--baseline .*binary.csv: not a results.csv"):
+        load_results(b, 2)
 
 
 @requires_mujoco
