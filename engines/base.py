@@ -310,6 +310,9 @@ class EngineAdapter:
             return settings
         return replace(settings, options=parse_options(self.Options, settings.options, self.name))
 
+    #: smallest `segments` a chain beam of this adapter accepts (1: no chain, any count)
+    min_segments: int = 1
+
     def check_settings(self, settings: EngineSettings) -> EngineSettings:
         """Validate settings for this adapter (EngineError naming the field and what is allowed)."""
         if settings.contact not in self.contacts:
@@ -318,6 +321,9 @@ class EngineAdapter:
         if settings.integrator is not None and self.integrators and settings.integrator not in self.integrators:
             raise EngineError(f"{self.name}: unknown integrator {settings.integrator!r}; "
                               f"known: {', '.join(self.integrators)}.")
+        if settings.segments is not None and settings.segments < self.min_segments:
+            raise EngineError(f"segments must be at least {self.min_segments} for a Hencky chain, "
+                              f"got {settings.segments}.")
         return self.parse(settings)
 
     def resolve_dt(self, scene, settings: EngineSettings, plan: Plan) -> float:

@@ -344,14 +344,10 @@ class MujocoAdapter(SteppingAdapter):
     module = "mujoco"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    min_segments = 2
     Options = MujocoOptions
     sample_lag = 1          # after mj_step, positions-derived data describe the step's start (see step)
 
-    def check_settings(self, settings: EngineSettings) -> EngineSettings:
-        settings = super().check_settings(settings)
-        if settings.segments is not None and settings.segments < 2:
-            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
-        return settings
 
     # ------------------------------------------------------------------ planning
     def chain(self, scene, settings: EngineSettings) -> HenckyChain | None:

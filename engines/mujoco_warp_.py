@@ -79,6 +79,7 @@ class MujocoWarpAdapter(EngineAdapter):
     module = "mujoco_warp"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    min_segments = 2
     Options = MujocoWarpOptions
 
     def version(self) -> str:
@@ -86,11 +87,6 @@ class MujocoWarpAdapter(EngineAdapter):
 
         return f"{version('mujoco-warp')} (warp {version('warp-lang')}, float32, cpu)"
 
-    def check_settings(self, settings: EngineSettings) -> EngineSettings:
-        settings = super().check_settings(settings)
-        if settings.segments is not None and settings.segments < 2:
-            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
-        return settings
 
     # ------------------------------------------------------------------ the identical model in C
     def c_settings(self, scene, settings: EngineSettings) -> EngineSettings:

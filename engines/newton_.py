@@ -78,6 +78,7 @@ class NewtonAdapter(EngineAdapter):
     module = "newton"
     contacts = ("hertz", "native")
     integrators = INTEGRATORS
+    min_segments = 2
     Options = NewtonOptions
     expected_failures = {
         "check_beam_model": "the chain is capped at 41 segments (SemiImplicit's penalty joints soften finer chains: "
@@ -91,11 +92,6 @@ class NewtonAdapter(EngineAdapter):
 
         return f"{version('newton')} (warp {version('warp-lang')}, float32, cpu)"
 
-    def check_settings(self, settings: EngineSettings) -> EngineSettings:
-        settings = super().check_settings(settings)
-        if settings.segments is not None and settings.segments < 2:
-            raise EngineError(f"segments must be at least 2 for a Hencky chain, got {settings.segments}.")
-        return settings
 
     def chain(self, scene, settings: EngineSettings) -> HenckyChain | None:
         """The Hencky chain this job builds (engines.chain; None for a plate)."""
