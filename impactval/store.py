@@ -40,9 +40,14 @@ import pandas as pd
 
 from impactval.errors import ImpactvalError
 
-STORE_SCHEMA_VERSION = 1
-#: results row schema (results.csv `schema_version`; 3: errors exported in %, job_key, new columns)
-SCHEMA_VERSION = 3
+#: store schema (2: the error-split, theory-gap and C-vs-Warp columns; a schema-1 store is migrated in
+#: place by adding them, its old rows reading NaN)
+STORE_SCHEMA_VERSION = 2
+#: results row schema (results.csv `schema_version`; 3: errors exported in %, job_key, new columns;
+#: 4: structure_err/numerics_err/theory_gap/vs_mujoco_c columns added, every schema-3 column unchanged)
+SCHEMA_VERSION = 4
+#: results schemas whose rows can be compared with this one (impactval.history): 4 only added columns
+COMPARABLE_SCHEMAS = (3, 4)
 
 
 class RunStatus(str, enum.Enum):
@@ -70,12 +75,22 @@ COLUMN_TYPES: dict[str, str] = {
     "n_contacts": _I, "n_steps": _I, "steps_per_s": _F,
     "wall_time_build_s": _F, "wall_time_step_s": _F, "wall_time_s": _F,
     "structure_frequencies": _T, "continuum_frequencies": _T,
+    # schema 4 (issue 17 item 2, issue 19): the error split per metric, the scene's theory gap, C vs Warp
+    **{f"{part}_{m}": _F for part in ("structure_err", "numerics_err", "theory_gap", "vs_mujoco_c")
+       for m in ("t_m", "f_m", "delta_m")},
+    "beam_theory": _T, "timoshenko_frequencies": _T,
 }
+#: columns added since store schema 1 (added to an old store's jobs table when it is opened)
+ADDED_IN_SCHEMA_2 = tuple(c for c in COLUMN_TYPES if c.startswith(
+    ("structure_err_", "numerics_err_", "theory_gap_", "vs_mujoco_c_")) or c in ("beam_theory",
+                                                                                  "timoshenko_frequencies"))
 #: fraction columns exported in % as NAME_pct
 PERCENT_COLUMNS = ("err_t_m", "err_f_m", "err_delta_m", "err_curve", "lin_err_t_m", "lin_err_f_m",
-                   "lin_err_delta_m", "lin_err_curve", "energy_error", "model_error")
+                   "lin_err_delta_m", "lin_err_curve", "energy_error", "model_error",
+                   *(c for c in COLUMN_TYPES if c.startswith(("structure_err_", "numerics_err_", "theory_gap_",
+                                                              "vs_mujoco_c_"))))
 #: list-valued columns kept out of results.csv (they go to frequencies.csv, one row per mode)
-LIST_COLUMNS = ("structure_frequencies", "continuum_frequencies")
+LIST_COLUMNS = ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies")
 #: results.csv / results.parquet columns, in order
 EXPORT_COLUMNS = tuple(f"{c}_pct" if c in PERCENT_COLUMNS else c for c in COLUMN_TYPES if c not in LIST_COLUMNS)
 
@@ -189,6 +204,8 @@ class Store:
                     have = c.execute(sa.select(self.schema.c.version)).scalars().all()
                     if not have:
                         c.execute(self.schema.insert().values(version=STORE_SCHEMA_VERSION))
+                    elif max(have) == 1:
+                        self._migrate_from_1(sa, c)
                     elif max(have) != STORE_SCHEMA_VERSION:
                         raise ImpactvalError(f"{self.url}: store schema {max(have)}, this impactval writes "
                                              f"{STORE_SCHEMA_VERSION}; use another --store.")
@@ -197,6 +214,17 @@ class Store:
                 if attempt == 4:
                     raise
                 time.sleep(0.2 * (attempt + 1))
+
+    def _migrate_from_1(self, sa, c) -> None:
+        """Schema 1 -> 2 in the open transaction: add the new row columns to `jobs` (NULL, read as
+        NaN / "" for the rows already there) and record version 2."""
+        have = {col["name"] for col in sa.inspect(c).get_columns("jobs")}
+        prep = self.engine.dialect.identifier_preparer
+        for name in ADDED_IN_SCHEMA_2:
+            if name not in have:
+                kind = self.jobs.c[name].type.compile(dialect=self.engine.dialect)
+                c.execute(sa.text(f"ALTER TABLE jobs ADD COLUMN {prep.quote(name)} {kind}"))
+        c.execute(self.schema.update().values(version=STORE_SCHEMA_VERSION))
 
     def _write(self, fn) -> Any:
         """Run `fn(conn)` in one transaction, retrying a few times when SQLite reports a lock."""
@@ -393,11 +421,12 @@ def export_frame(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def frequencies_frame(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per (job, model, mode): job_key, scene, engine, segments, model ("engine" or
-    "continuum"), mode (1-based), omega_rad_s."""
+    """One row per (job, model, mode): job_key, scene, engine, segments, model ("engine", "continuum"
+    (Euler-Bernoulli, as the adapters report it) or "timoshenko"), mode (1-based), omega_rad_s."""
     recs = []
     for _, r in df.iterrows():
-        for col, label in (("structure_frequencies", "engine"), ("continuum_frequencies", "continuum")):
+        for col, label in (("structure_frequencies", "engine"), ("continuum_frequencies", "continuum"),
+                           ("timoshenko_frequencies", "timoshenko")):
             text = r.get(col, "")
             if isinstance(text, str) and text:
                 for i, w in enumerate(json.loads(text), start=1):
