@@ -393,7 +393,21 @@ def _theory_verdict(r, scene_theory: str, other: str) -> str:
         return f"; its structure model behaves like {_THEORY[other]}'s"
     if all(abs(a) <= GAP_LIKE * abs(b) for a, b in zip(s, g)):
         return f"; its structure model behaves like {_THEORY[scene_theory]}'s"
-    return "; its structure error is not the theory gap: mostly the model's own discretisation or mode count"
+    return "; neither theory alone explains its structure error (the model's own discretisation or mode count is part of it)"
+
+
+def _frequency_note(r) -> str:
+    """How far the model's first frequencies are from each theory's (largest |difference|), when both are known."""
+    s, c, t = (_freqs(r, k) for k in ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies"))
+    n = min(len(s), len(c), len(t), N_MODES_SHOWN)
+    if n == 0:
+        return ""
+
+    def worst(ref):
+        return max((s[i] / ref[i] - 1.0 for i in range(n)), key=abs)
+
+    return (f" (its first {n} frequencies differ by up to {100 * worst(t):+.2f} % from Timoshenko's, "
+            f"{100 * worst(c):+.2f} % from EB's)")
 
 
 def error_source_section(df: pd.DataFrame) -> list[str]:
@@ -439,7 +453,7 @@ def error_source_section(df: pd.DataFrame) -> list[str]:
         if any(math.isfinite(x) for x in gap):
             line += (f". Theory gap {_short_theory(theory)} -> {_short_theory(other)}: "
                      + ", ".join(f"{m} {_pct(x)} %" for m, x in zip(_METRICS, gap)))
-            line += _theory_verdict(r, theory, other)
+            line += _theory_verdict(r, theory, other) + _frequency_note(r)
         out.append(line + ".")
     return out + [""]
 
