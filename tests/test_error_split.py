@@ -18,6 +18,7 @@ import pytest
 
 import impactval
 from conftest import importorskip_mark, requires_exudyn, requires_mujoco
+from pg_server import postgres_server, postgres_url  # noqa: F401 - fixtures
 from impactval.store import SCHEMA_VERSION, STORE_SCHEMA_VERSION, Store, export
 
 DATA = Path(__file__).parent / "data" / "store_v1"
@@ -279,3 +280,36 @@ def test_mujoco_warp_chain_c_vs_warp_and_split(tmp_path):
     for m in METRICS:
         assert abs(r[f"vs_mujoco_c_{m}"]) < 5e-3, m
         assert math.isfinite(r[f"structure_err_{m}"]) and abs(r[f"numerics_err_{m}"]) < 5e-3, m
+
+
+def test_schema_1_store_on_postgresql_is_migrated(postgres_url, tmp_path):
+    """The same old store on a real PostgreSQL server: its tables and rows copied from the schema-1
+    SQLite file (reflected, so exactly main's schema), then opened by this impactval."""
+    import sqlalchemy as sa
+
+    lite = sa.create_engine(f"sqlite:///{DATA / 'impactval.sqlite'}")
+    md = sa.MetaData()
+    md.reflect(lite)
+    pg = sa.create_engine(postgres_url.replace("postgresql://", "postgresql+psycopg://", 1))
+    for table in md.sorted_tables:
+        for col in table.columns:                   # SQLite's reflected types -> portable ones
+            if isinstance(col.type, sa.Float):
+                col.type = sa.Double()
+            elif isinstance(col.type, sa.LargeBinary):     # BLOB -> BYTEA
+                col.type = sa.LargeBinary()
+    md.create_all(pg)
+    with lite.connect() as src, pg.begin() as dst:
+        for table in md.sorted_tables:
+            rows = [dict(r) for r in src.execute(table.select()).mappings()]
+            if rows:
+                dst.execute(table.insert(), rows)
+    pg.dispose()
+    db = Store(postgres_url)
+    rows = db.rows()
+    assert len(rows) == 4 and rows["structure_err_t_m"].isna().all() and rows["err_f_m"].notna().sum() == 3
+    from impactval.runner import run
+
+    df = run([stubby_eb()], [ORACLE], dt=1e-6, store=db)
+    assert df["status"].tolist() == ["ok"] and math.isfinite(df["structure_err_f_m"].iloc[0])
+    assert len(db.rows()) == 5
+    db.close()
