@@ -393,6 +393,11 @@ def _theory_verdict(r, scene_theory: str, other: str) -> str:
         return f"; its structure model behaves like {_THEORY[other]}'s"
     if all(abs(a) <= GAP_LIKE * abs(b) for a, b in zip(s, g)):
         return f"; its structure model behaves like {_THEORY[scene_theory]}'s"
+    rest = " (the rest: the model's own discretisation or mode count)"
+    if all(abs(a - b) < abs(a) for a, b in zip(s, g)):
+        return f"; its structure model is closer to {_THEORY[other]}'s than to {_THEORY[scene_theory]}'s" + rest
+    if all(abs(a - b) > abs(a) for a, b in zip(s, g)):
+        return f"; its structure model is closer to {_THEORY[scene_theory]}'s than to {_THEORY[other]}'s" + rest
     return "; neither theory alone explains its structure error (the model's own discretisation or mode count is part of it)"
 
 
@@ -406,8 +411,8 @@ def _frequency_note(r) -> str:
     def worst(ref):
         return max((s[i] / ref[i] - 1.0 for i in range(n)), key=abs)
 
-    return (f" (its first {n} frequencies differ by up to {100 * worst(t):+.2f} % from Timoshenko's, "
-            f"{100 * worst(c):+.2f} % from EB's)")
+    return (f"; its first {n} frequencies differ by up to {100 * worst(t):+.2f} % from Timoshenko's, "
+            f"{100 * worst(c):+.2f} % from EB's")
 
 
 def error_source_section(df: pd.DataFrame) -> list[str]:

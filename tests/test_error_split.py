@@ -313,3 +313,28 @@ def test_schema_1_store_on_postgresql_is_migrated(postgres_url, tmp_path):
     assert df["status"].tolist() == ["ok"] and math.isfinite(df["structure_err_f_m"].iloc[0])
     assert len(db.rows()) == 5
     db.close()
+
+
+@pytest.mark.parametrize("factor, verdict", [
+    (1.1, "behaves like Timoshenko's"), (0.1, "behaves like Euler-Bernoulli's"),
+    (0.7, "closer to Timoshenko's than to Euler-Bernoulli's"), (-0.7, "closer to Euler-Bernoulli's than to Timoshenko's"),
+    ("mixed", "neither theory alone"), ("tiny gap", "the two theories agree here")])
+def test_theory_verdict_says_only_what_every_metric_supports(factor, verdict):
+    from impactval.reports.run_report import error_source_section
+    from impactval.store import COLUMN_TYPES
+
+    gap = {"t_m": 0.02, "f_m": -0.03, "delta_m": -0.02}
+    if factor == "mixed":
+        structure = {"t_m": 0.016, "f_m": 0.01, "delta_m": -0.018}
+    elif factor == "tiny gap":
+        gap = {m: v / 100 for m, v in gap.items()}
+        structure = {m: -0.01 for m in METRICS}
+    else:
+        structure = {m: factor * g for m, g in gap.items()}
+    row = {c: (math.nan if t == "float" else "") for c, t in COLUMN_TYPES.items()}
+    row.update(scene="b", engine="e", contact="hertz", dt=1e-6, segments="", status="ok", beam_theory="euler-bernoulli")
+    for m in METRICS:
+        row.update({f"err_{m}": structure[m] + 1e-4, f"structure_err_{m}": structure[m], f"numerics_err_{m}": 1e-4,
+                    f"theory_gap_{m}": gap[m]})
+    text = "\n".join(error_source_section(pd.DataFrame([row])))
+    assert verdict in text and text.count("Theory gap EB -> Timoshenko") == 1
