@@ -220,10 +220,13 @@ class Store:
         NaN / "" for the rows already there) and record version 2."""
         have = {col["name"] for col in sa.inspect(c).get_columns("jobs")}
         prep = self.engine.dialect.identifier_preparer
+        # two processes migrating at once: PostgreSQL skips a column the other added; SQLite raises
+        # "duplicate column" (OperationalError), and _create retries, then finds version 2
+        guard = "IF NOT EXISTS " if self.engine.dialect.name == "postgresql" else ""
         for name in ADDED_IN_SCHEMA_2:
             if name not in have:
                 kind = self.jobs.c[name].type.compile(dialect=self.engine.dialect)
-                c.execute(sa.text(f"ALTER TABLE jobs ADD COLUMN {prep.quote(name)} {kind}"))
+                c.execute(sa.text(f"ALTER TABLE jobs ADD COLUMN {guard}{prep.quote(name)} {kind}"))
         c.execute(self.schema.update().values(version=STORE_SCHEMA_VERSION))
 
     def _write(self, fn) -> Any:

@@ -338,3 +338,21 @@ def test_theory_verdict_says_only_what_every_metric_supports(factor, verdict):
                     f"theory_gap_{m}": gap[m]})
     text = "\n".join(error_source_section(pd.DataFrame([row])))
     assert verdict in text and text.count("Theory gap EB -> Timoshenko") == 1
+
+
+def test_two_processes_opening_one_old_store_at_once(tmp_path):
+    """Both migrate-or-find-migrated; neither fails, the columns exist once."""
+    import sqlite3
+    import subprocess
+    import sys
+
+    path = tmp_path / "impactval.sqlite"
+    shutil.copy(DATA / "impactval.sqlite", path)
+    code = f"from impactval.store import Store; print(len(Store({str(path)!r}).rows()))"
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(3)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0], [o[1][-500:] for o in outs]
+    assert [o[0].strip() for o in outs] == ["4"] * 3
+    cols = [r[1] for r in sqlite3.connect(path).execute("pragma table_info(jobs)")]
+    assert cols.count("structure_err_t_m") == 1 and len(cols) == len(set(cols))
