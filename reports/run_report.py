@@ -363,7 +363,7 @@ def frequency_section(df: pd.DataFrame) -> list[str]:
            "Each mode: the engine model's frequency, then its signed difference to the Euler-Bernoulli continuum "
            "(EB) and, for beams, to the Timoshenko beam (both spectra in frequency order).", ""]
     for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
-        s, c, t = _freqs(r, "structure_frequencies"), _freqs(r, "continuum_frequencies"), _freqs(r, "timoshenko_frequencies")
+        s, c, t = (_freqs(r, k) for k in ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies"))
         items = []
         for i, a in enumerate(s[:N_MODES_SHOWN]):
             diffs = [f"{label} {100 * (a / ref[i] - 1):+.2f} %" for label, ref in (("EB", c), ("Timoshenko", t))
@@ -398,7 +398,8 @@ def _theory_verdict(r, scene_theory: str, other: str) -> str:
         return f"; its structure model is closer to {_THEORY[other]}'s than to {_THEORY[scene_theory]}'s" + rest
     if all(abs(a - b) > abs(a) for a, b in zip(s, g)):
         return f"; its structure model is closer to {_THEORY[scene_theory]}'s than to {_THEORY[other]}'s" + rest
-    return "; neither theory alone explains its structure error (the model's own discretisation or mode count is part of it)"
+    return ("; neither theory alone explains its structure error (the model's own discretisation or mode count "
+            "is part of it)")
 
 
 def _frequency_note(r) -> str:

@@ -317,7 +317,8 @@ def test_schema_1_store_on_postgresql_is_migrated(postgres_url, tmp_path):
 
 @pytest.mark.parametrize("factor, verdict", [
     (1.1, "behaves like Timoshenko's"), (0.1, "behaves like Euler-Bernoulli's"),
-    (0.7, "closer to Timoshenko's than to Euler-Bernoulli's"), (-0.7, "closer to Euler-Bernoulli's than to Timoshenko's"),
+    (0.7, "closer to Timoshenko's than to Euler-Bernoulli's"),
+    (-0.7, "closer to Euler-Bernoulli's than to Timoshenko's"),
     ("mixed", "neither theory alone"), ("tiny gap", "the two theories agree here")])
 def test_theory_verdict_says_only_what_every_metric_supports(factor, verdict):
     from impactval.reports.run_report import error_source_section
