@@ -36,19 +36,21 @@ def test_dt_axis_default_and_t_m_tokens():
     assert ax.values[0] == pytest.approx(t_m / 1e4) and ax.values[-1] == pytest.approx(t_m)
     ratios = [b / a for a, b in zip(ax.values, ax.values[1:])]
     assert max(ratios) == pytest.approx(min(ratios)) == pytest.approx(10 ** (4 / 12))
-    ax = parse_axis("dt=t_m/100..0.5*t_m:3", t_m)
+    ax = parse_axis("dt=t_m/100:0.5*t_m:3", t_m)
     assert ax.values == pytest.approx((4e-7, math.sqrt(4e-7 * 2e-5), 2e-5))
     assert parse_axis("velocity=2,0.5,1").values == (0.5, 1.0, 2.0)
-    assert parse_axis("target.height=0.01..0.02:3").values == pytest.approx((0.01, 0.015, 0.02))   # linear
+    assert parse_axis("target.height=0.01:0.04:3").values == (0.01, 0.02, 0.04)        # a:b:n is log-spaced
+    assert parse_axis("target.height=0.01,0.015,0.02").values == (0.01, 0.015, 0.02)  # linear: a list
     assert parse_axis("stiffness=pmma,1e13").values == ("pmma", 1e13)
 
 
 @pytest.mark.parametrize("text, match", [
-    ("speed=1..2", r"unknown axis 'speed'; known: dt, velocity"),
+    ("speed=1:2:3", r"unknown axis 'speed'; known: dt, velocity"),
     ("velocity=-1,2", r"values must be positive"),
-    ("dt=1e-3..1", r"time steps must be <= 0.01 s"),
+    ("dt=1e-3:1:3", r"time steps must be <= 0.01 s"),
     ("stiffness=rubber", r"'rubber' is neither a material"),
-    ("velocity=1..2:x", r"count after ':' must be a whole number"),
+    ("velocity=1:2:x", r"--axis velocity: in a:b:n, n is a whole number"),
+    ("velocity=1..2", r"LO..HI\[:N\] is no longer read; .* e.g. --axis velocity=1:2:9"),
     ("ball.radius", r"give values"),
 ])
 def test_bad_axis_is_one_line_error(text, match):
