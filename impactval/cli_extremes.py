@@ -71,13 +71,14 @@ def extremes(scene, engines, axes, under, dt, contact, integrator, segments, opt
     names = [e.strip() for e in engines.split(",") if e.strip()]
     df = run_map(sc, names, parsed, settings=settings, under=parse_under(under), tol=tol, store=db, workers=jobs,
                  force=force, progress=make_progress("auto"), unguarded=not guarded, out=out,
-                 command="extremes " + " ".join([scene, "--engines", engines, *(f"--axis {a}" for a in axes)]))
+                 command="extremes " + " ".join([scene, "--engines", engines, *(f"--axis {a}" for a in axes)]),
+                 reference=ref)
     pred = None
     if predictability:
         dts = sorted({float(x) for x in df["dt"] if isinstance(x, float) and math.isfinite(x)})
         segs = [int(x) for x in df.get("segments", []) if str(x).isdigit()]
         pred = predict_fn(sc, names, dts, settings=settings, tol=tol, store=db, workers=jobs,
-                          segments=segments or (min(segs) if segs else None))
+                          segments=segments or (min(segs) if segs else None), reference=ref if ref.success else None)
     md = write(df, out, pred)
     for line in safe_region(df):
         click.echo(line)

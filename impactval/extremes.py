@@ -353,7 +353,7 @@ def _settings_with(base, dt):
 
 def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=None, under: float = DEFAULT_UNDER,
             tol: float = 1e-6, store=None, workers: int | None = None, force: bool = False, progress=None,
-            unguarded: bool = True, out=None, command: str = "") -> "pd.DataFrame":
+            unguarded: bool = True, out=None, command: str = "", reference=None) -> "pd.DataFrame":
     """Run every engine in every cell of the grid; one row per (cell, engine).
 
     Parameters
@@ -366,6 +366,10 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
     tol : relative tolerance of the references
     store, workers, force, progress, out, command : see `impactval.runner.execute`
     unguarded : run an explicit dt past the predicted limit (impactval.unguarded) instead of refusing it
+    reference : the base scene's reference at `tol`, optional (when the caller has solved it already)
+
+    Each cell's reference is solved once, here, and handed to the runner with the jobs (never solved
+    twice; a base-scene cell reuses `reference`).
 
     Returns a DataFrame: `engine` (as given), one column per axis, `cell_status`, `status` (the run's),
     errors (signed fractions), `max_abs_err`, `dt` [s], the predicted `dt_limit`, `dt_contact`,
@@ -405,7 +409,7 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
             sc = dataclasses.replace(sc, name=cell_name(scene, axes, coords))
         cells.append((coords, sc, dt))
 
-    refs: dict[str, Any] = {}
+    refs: dict[str, Any] = {scene.name: reference} if reference is not None and reference.success else {}
     for _, sc, _ in cells:
         if sc.name not in refs:
             try:
@@ -426,8 +430,9 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
             meta.append((coords, sc, label, spec, st, lim, ref))
             if not isinstance(ref, str):
                 jobs.append(Job(sc, run_spec, st, tol))
+    solved = {sc.name: (sc, tol, refs[sc.name]) for _, sc, _ in cells if not isinstance(refs[sc.name], str)}
     rows = execute(jobs, store=store, workers=workers, force=force, progress=progress, out=out,
-                   command=command or f"extremes {scene.name}") if jobs else []
+                   command=command or f"extremes {scene.name}", references=solved.values()) if jobs else []
     rows_iter = iter(rows)
     out_rows = []
     for coords, sc, label, spec, st, lim, ref in meta:
@@ -578,11 +583,13 @@ def perturbations(scene, rel_v0: float = 1e-6, point_fraction: float = 0.1, segm
 
 def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, settings=None, tol: float = 1e-6,
                    jump: float = 1e-3, store=None, workers: int | None = None, rel_v0: float = 1e-6,
-                   point_fraction: float = 0.1, segments: int | None = None) -> "pd.DataFrame":
+                   point_fraction: float = 0.1, segments: int | None = None, reference=None) -> "pd.DataFrame":
     """Run each engine at each dt on the scene and its perturbations (`perturbations`); one row
     per (engine, dt, perturbation) with the engine's relative change of t_m, f_m, delta_m, the
     reference's, the contact counts, and `jumped`: a contact event gained or lost, or a metric
-    whose change differs from the reference's by more than `jump` (relative), or a status change."""
+    whose change differs from the reference's by more than `jump` (relative), or a status change.
+    `reference`: the scene's reference at `tol` when already solved; each reference is solved once
+    and handed to the runner."""
     import pandas as pd
 
     import impactval
@@ -594,7 +601,8 @@ def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, setti
     base = settings or EngineSettings()
     specs = [resolve_engine(e) for e in engines]
     perts = perturbations(scene, rel_v0, point_fraction, segments)
-    refs = {s.name: impactval.solve(s, tol=tol) for s in [scene, *(p.scene for p in perts)]}
+    scenes = [scene, *(p.scene for p in perts)]
+    refs = {s.name: reference if s is scene and reference is not None else impactval.solve(s, tol=tol) for s in scenes}
     jobs, keys = [], []
     for label, spec in zip(engines, specs):
         for dt in dts:
@@ -602,7 +610,8 @@ def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, setti
             for sc in [scene, *(p.scene for p in perts)]:
                 jobs.append(Job(sc, unguarded_spec(spec), st, tol))
                 keys.append((label, float(dt), sc.name))
-    rows = dict(zip(keys, execute(jobs, store=store, workers=workers, command=f"predictability {scene.name}")))
+    rows = dict(zip(keys, execute(jobs, store=store, workers=workers, command=f"predictability {scene.name}",
+                                  references=[(s, tol, refs[s.name]) for s in scenes])))
     out = []
     for label in engines:
         for dt in dts:

@@ -243,3 +243,34 @@ def test_report_names_a_loose_reference():
     assert "s[v=2]: reference uncertainty 0.05" in md and "s[v=1]: reference" not in md
     assert "- delta_m/R = 0.2" in md
     assert "e: ok (all errors under 1 %) for velocity in [1, 2] m/s." in md
+
+
+# ---------------------------------------------------------------------------- one solve per cell
+def _count_solves(monkeypatch) -> list[str]:
+    """Count impactval.solve calls in this process (extremes, the runner and the CLI all call it there)."""
+    calls: list[str] = []
+    real = impactval.solve
+
+    def counting(scene, **kw):
+        calls.append(getattr(scene, "name", str(scene)))
+        return real(scene, **kw)
+
+    monkeypatch.setattr(impactval, "solve", counting)
+    return calls
+
+
+def test_each_cell_reference_is_solved_once(monkeypatch, tmp_path):
+    """A 2 x 2 map (velocity x dt) has 2 cell scenes: 2 solves, the runner reuses them (it solved
+    each again before: 4); with --predictability the base scene and its 2 perturbations once each."""
+    scene = impactval.load_scene("plate_steel")
+    calls = _count_solves(monkeypatch)
+    df = run_map(scene, [FAKE], [parse_axis("velocity=0.5,2"), parse_axis("dt=1e-7,2e-7")], workers=1,
+                 store=tmp_path / "a.sqlite")
+    assert len(df) == 4 and set(df["status"]) == {"ok"}
+    assert sorted(calls) == ["plate_steel[velocity=0.5]", "plate_steel[velocity=2]"]
+    calls.clear()
+    res = CliRunner().invoke(impactval.cli.main, ["extremes", "plate_steel", "--engines", FAKE, "--axis", "dt=1e-7,2e-7",
+                                                  "--predictability", "-j", "1", "--out", str(tmp_path / "cli")])
+    assert res.exit_code == 0, res.output
+    # the CLI's t_m solve serves the map and the predictability runs; a plate has no impact-point perturbation
+    assert sorted(calls) == ["plate_steel", "plate_steel+dv0"], calls
