@@ -155,6 +155,9 @@ def parse_axis(text: str, t_m: float | None = None) -> Axis:
                                      f"({', '.join(BUILTIN_MATERIALS)}) nor a Young's modulus in Pa.")
             elif tok:
                 values += ranges.parse_list(tok, option, **{**read, "example": "stiffness=1e9:1e13:5"})
+        if not values:
+            raise ImpactvalError("--axis stiffness: give at least one material or Young's modulus (e.g. "
+                                 "stiffness=pmma,steel,1e12 or stiffness=1e9:1e13:5).")
         return Axis(name, tuple(values), "Pa", True)
     if not spec:
         if name == "dt":

@@ -99,3 +99,5 @@ def test_range_items_mix_with_lists_and_prefixes():
     assert parse_speeds("0.5, 0.1:10:3, 1") == (0.1, 0.5, 1.0, 10.0)
     assert extremes_axis("stiffness=pmma,1e9:1e11:3").values == ("pmma", 1e9, 1e10, 1e11)
     assert extremes_axis("target.velocity=-1,0").values == (-1.0, 0.0)   # a list may cross zero where the field may
+    with pytest.raises(ImpactvalError, match="--axis stiffness: give at least one"):
+        extremes_axis("stiffness=,")
