@@ -16,18 +16,22 @@ from impactval.tune import parse_speeds
 SAME_TEXTS = ["1e-5:1e-8:4", "1e-8:1e-5:4", "2e-3:1e-3:5", "1e-4:1e-6:7,5e-3", "3e-3,1e-3:1e-2:3"]
 
 
-def _three(text: str) -> tuple[list[float], list[float], list[float], list[float]]:
+def _three(text: str) -> tuple[list[float], list[float], list[float], list[float], list[float]]:
+    from impactval.cli import _parse_dts
+
     sweep_dt = sorted(sw.parse_axis(text, "dt", "float", ["mujoco"])["mujoco"])
     speeds = list(parse_speeds(text))
     axis_dt = list(extremes_axis("dt=" + text, 4e-5).values)
     axis_v = list(extremes_axis("velocity=" + text).values)
-    return sweep_dt, speeds, axis_dt, axis_v
+    run_dt = sorted(_parse_dts(text))
+    return sweep_dt, speeds, axis_dt, axis_v, run_dt
 
 
 @pytest.mark.parametrize("text", SAME_TEXTS)
 def test_the_three_commands_read_the_same_values(text):
-    sweep_dt, speeds, axis_dt, axis_v = _three(text)
-    assert sweep_dt == speeds == axis_dt == axis_v           # the same floats, not merely close
+    """sweep --dt, tune --speeds, extremes --axis and run --dt."""
+    sweep_dt, speeds, axis_dt, axis_v, run_dt = _three(text)
+    assert sweep_dt == speeds == axis_dt == axis_v == run_dt          # the same floats, not merely close
     assert len(set(sweep_dt)) == len(sweep_dt)
 
 
@@ -77,11 +81,13 @@ def test_every_bad_form_is_exit_2_with_one_line_naming_the_option(tmp_path, text
         "--dt": ["sweep", "plate_steel", "--dt", text, "--out", str(tmp_path / "s")],
         "--speeds": ["tune", "mujoco", "plate_steel", "--speeds", text, "--out", str(tmp_path / "t")],
         "--axis velocity": ["extremes", "plate_steel", "--axis", f"velocity={text}", "--out", str(tmp_path / "e")],
+        "run --dt": ["run", "plate_steel", "--dt", text, "--out", str(tmp_path / "r")],
     }
     for option, args in commands.items():
         line = _cli_line(args)
+        option = option.removeprefix("run ")
         assert option in line and words in line, (option, line)
-    assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "ste")   # refused before work
+    assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "ster")   # refused before work
 
 
 def test_old_extremes_range_is_refused_naming_the_new_form():
