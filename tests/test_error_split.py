@@ -143,16 +143,20 @@ def test_linear_contact_rows_keep_structure_but_do_not_split_numerics():
 
 
 # ---------------------------------------------------------------------------- stores and results from before
-def test_schema_1_store_written_by_main_opens_and_old_rows_read_nan(tmp_path):
+def test_store_written_by_main_before_the_columns_opens_and_old_rows_read_nan(tmp_path):
     import sqlite3
 
     path = tmp_path / "impactval.sqlite"
     shutil.copy(DATA / "impactval.sqlite", path)
     old_csv = pd.read_csv(DATA / "results.csv")
-    assert sqlite3.connect(path).execute("select version from schema_version").fetchall() == [(1,)]
-    db = Store(path)                                   # migrated in place
+    def job_columns():
+        return [r[1] for r in sqlite3.connect(path).execute("pragma table_info(jobs)")]
+
+    assert "structure_err_t_m" not in job_columns()
+    db = Store(path)                                   # the new columns are added in place
     rows = db.rows()
     assert len(rows) == len(old_csv) == 4
+    assert {"structure_err_t_m", "vs_mujoco_c_delta_m", "timoshenko_frequencies"} <= set(job_columns())
     assert sqlite3.connect(path).execute("select version from schema_version").fetchall() == [(STORE_SCHEMA_VERSION,)]
     merged = rows.merge(old_csv, on="job_key", suffixes=("", "_old"))
     ok = merged[merged["status"] == "ok"]
@@ -282,8 +286,8 @@ def test_mujoco_warp_chain_c_vs_warp_and_split(tmp_path):
         assert math.isfinite(r[f"structure_err_{m}"]) and abs(r[f"numerics_err_{m}"]) < 5e-3, m
 
 
-def test_schema_1_store_on_postgresql_is_migrated(postgres_url, tmp_path):
-    """The same old store on a real PostgreSQL server: its tables and rows copied from the schema-1
+def test_old_store_on_postgresql_gets_the_columns(postgres_url, tmp_path):
+    """The same old store on a real PostgreSQL server: its tables and rows copied from main's
     SQLite file (reflected, so exactly main's schema), then opened by this impactval."""
     import sqlalchemy as sa
 
@@ -342,7 +346,7 @@ def test_theory_verdict_says_only_what_every_metric_supports(factor, verdict):
 
 
 def test_two_processes_opening_one_old_store_at_once(tmp_path):
-    """Both migrate-or-find-migrated; neither fails, the columns exist once."""
+    """Each adds the columns or finds them added; none fails, every column exists once."""
     import sqlite3
     import subprocess
     import sys
