@@ -358,7 +358,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
             scheduler: Any = None, force: bool = False, progress: Any = None, out: str | Path | None = None,
             command: str = "", tag: str | None = None, keep_series: bool = False,
             on_row: Callable[[dict[str, Any]], None] | None = None, run_id: str | None = None,
-            references: Iterable[tuple[Any, float, ImpactResult]] = ()) -> list[dict[str, Any]]:
+            references: Iterable[tuple[Any, float, ImpactResult]] = (),
+            theory_gap: bool = True) -> list[dict[str, Any]]:
     """Run engine jobs (reusing stored ones) and return one row per job, in the jobs' order.
 
     Parameters
@@ -381,6 +382,11 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         The run's id (default: a new UUID4).
     references : iterable of (scene, tol, reference ImpactResult), optional
         References the caller has solved already (not solved again for jobs of that scene and tol).
+    theory_gap : bool
+        For beam scenes, also solve the reference with the other beam theory once per scene
+        (`theory_gap_*`, `timoshenko_frequencies`; ~0.01 s for a simply supported beam, 3-17 s for a
+        clamped one as the velocity and the modes needed grow). False leaves those columns empty, e.g.
+        for maps over many beam cells whose report does not show them.
 
     Rows are dicts with the keys of `COLUMNS` (errors as signed fractions). Stored rows with a
     status in `REUSABLE_STATUSES` are reused (crashed and timeout rows are retried). Raises
@@ -414,7 +420,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     def finish(k: str, res: ImpactResult, seconds: float) -> None:
         job = todo[k]
         row = make_row(run_id, job.scene, job.spec, job.settings, res, refs.ref(job), refs.lin(job, res), k,
-                       theory=refs.theory(job))
+                       theory=refs.theory(job) if theory_gap else None)
         meta = dict(engine_version=engines[job.spec], adapter_version=_adapter_version(job.spec),
                     reference_version=reference_version(), tol=float(job.tol),
                     settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr),

@@ -361,3 +361,29 @@ def test_two_processes_opening_one_old_store_at_once(tmp_path):
     assert [o[0].strip() for o in outs] == ["4"] * 3
     cols = [r[1] for r in sqlite3.connect(path).execute("pragma table_info(jobs)")]
     assert cols.count("structure_err_t_m") == 1 and len(cols) == len(set(cols))
+
+
+def test_theory_gap_is_solved_once_per_scene_and_can_be_left_out(monkeypatch, tmp_path):
+    """Two settings on one beam scene: one extra solve (the other theory); theory_gap=False: none."""
+    from impactval.engines.base import EngineSettings
+    from impactval.jobs import Job
+    from impactval.runner import execute
+
+    calls = []
+    real = impactval.solve
+
+    def counting(scene, **kw):
+        calls.append(scene.target.theory)
+        return real(scene, **kw)
+
+    monkeypatch.setattr(impactval, "solve", counting)
+    scene = stubby_eb()
+    jobs = [Job(scene, ORACLE, EngineSettings(dt=dt), 1e-6) for dt in (1e-6, 2e-6)]
+    rows = execute(jobs, store=tmp_path / "a.sqlite", workers=1)
+    assert sorted(calls) == ["euler-bernoulli", "timoshenko"]
+    assert all(math.isfinite(r["theory_gap_f_m"]) for r in rows)
+    calls.clear()
+    rows = execute(jobs, store=tmp_path / "b.sqlite", workers=1, theory_gap=False)
+    assert calls == ["euler-bernoulli"]
+    assert all(math.isnan(r["theory_gap_f_m"]) and r["timoshenko_frequencies"] == "" for r in rows)
+    assert all(math.isfinite(r["structure_err_f_m"]) for r in rows)       # the split does not need the gap
