@@ -296,7 +296,8 @@ class NewtonAdapter(EngineAdapter):
         if end is not None:
             n_rec = min(n_rec, end)                  # the window rule: samples 0..end
         delta, f, xs, xb, vb = self._series(states.numpy()[:n_rec + 1], first, lay, scene, nb)
-        energy = self._energy(states.numpy()[:n_rec + 1], first, lay, scene, model, nb, delta)
+        # one state past the last sample (when stepped) gives the last sample's velocity after its step
+        energy = self._energy(states.numpy()[:min(n_rec + 2, n_stepped + 1)], first, lay, scene, model, nb, delta)
         if hertz:
             f = scene.alpha * np.maximum(delta, 0.0) ** 1.5
             energy += 0.4 * scene.alpha * np.maximum(delta, 0.0) ** 2.5 - 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
@@ -335,24 +336,27 @@ class NewtonAdapter(EngineAdapter):
 
     @staticmethod
     def _energy(st, first, lay, scene, model, nb, delta) -> np.ndarray:
-        """Kinetic (mean of the velocities around a sample: SemiImplicit moves with the new velocity)
-        + hinge springs + contact spring [J]."""
+        """Energy [J] per sample k (len(delta) samples; `st` may hold one state more): kinetic
+        1/2 v_k' M v_(k+1) with the twists before (v_k) and after (v_(k+1)) step k, the quantity semi-implicit
+        Euler conserves on a linear system (as the MuJoCo adapters measure it; the last sample without a next
+        state uses its own twist) + hinge springs + contact spring + the penalty joints' stretch."""
         st = st.astype(float)
         st[0] = first
+        n_s = len(delta)
         qd = st[:, 7 * nb:].reshape(len(st), nb, 6)
-        q = st[:, :7 * nb].reshape(len(st), nb, 7)
+        q = st[:n_s, :7 * nb].reshape(n_s, nb, 7)
         mass = model.body_mass.numpy().astype(float)
         inertia = model.body_inertia.numpy().astype(float)
-        v = qd.copy()
-        v[:-1] = 0.5 * (qd[:-1] + qd[1:])
-        ke = 0.5 * np.einsum("b,kbi,kbi->k", mass, v[..., :3], v[..., :3])
-        ke += 0.5 * np.einsum("kbi,bij,kbj->k", v[..., 3:], inertia, v[..., 3:])   # planar: I ~ world frame
+        before = qd[:n_s]
+        after = np.concatenate([qd[1:n_s + 1], qd[len(qd) - 1:][:max(0, n_s + 1 - len(qd))]])
+        ke = 0.5 * np.einsum("b,kbi,kbi->k", mass, before[..., :3], after[..., :3])
+        ke += 0.5 * np.einsum("kbi,bij,kbj->k", before[..., 3:], inertia, after[..., 3:])   # planar: I ~ world frame
         pe = 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
         if lay["segments"]:
             n = lay["segments"]
             chain = q[:, :n]                  # the segments are bodies 0..n-1
             theta = 2.0 * np.arctan2(chain[..., 4], chain[..., 6])     # rotation about y
-            rel = np.diff(np.concatenate([np.zeros((len(st), 1)), theta], axis=1), axis=1)
+            rel = np.diff(np.concatenate([np.zeros((n_s, 1)), theta], axis=1), axis=1)
             k = np.asarray(lay["hinge_stiffness"])
             pe += 0.5 * rel**2 @ k[:n]
             if len(k) > n:
