@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, fields, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -55,6 +56,10 @@ from impactval.errors import EngineError
 #: "none" chain (m l^2/12, worse conditioned) runs to N = 81 (NaN at 93) with solver-iteration overflows
 #: and float32 differences to C up to 0.7 % from N ~ 76. A larger settings.segments is built as asked.
 MAX_SEGMENTS = {"section": 121, "none": 81}
+#: largest diagonally scaled condition number of the chain's mass matrix the sizing accepts for float32
+#: (measured, scaled cond of M(q0) -> outcome in float32: <= 1.8e7 every chain ran and matched MuJoCo C within
+#: 0.04 %; 2.8e7 ("none", heavy_wc_slender N = 76) 0.7 % off C; >= 5.6e7 NaN or energy growth)
+COND_LIMIT = 2e7
 #: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
 CHUNK = 64
 #: largest number of contacts / constraint rows the Warp data holds (one contact pair, supports)
@@ -104,7 +109,7 @@ class MujocoWarpAdapter(EngineAdapter):
         c_opts = MujocoOptions(**{f.name: getattr(opts, f.name) for f in fields(MujocoOptions)})
         segments = settings.segments
         if segments is None and scene.target.kind == "beam":
-            segments = sized_segments(scene, c_opts.chain_tol, c_opts.rotary_inertia)
+            segments = sized_segments(scene, c_opts.chain_tol, c_opts.rotary_inertia, c_opts.chain_root)
         return replace(settings, options=c_opts, segments=segments)
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
@@ -211,14 +216,24 @@ class MujocoWarpAdapter(EngineAdapter):
         diagnostics["graph_capture"] = stepper.graph is not None
         diagnostics["float"] = "float32"
         overflow = int(d.overflow.numpy()[0])
+        notes = []
         if overflow & quiet:
             names = [t.name for t in (mjw.OverflowType.ITERATIONS, mjw.OverflowType.LS_ITERATIONS) if overflow & int(t)]
             diagnostics["solver_overflow"] = names
-            diagnostics["validity"] = (f"mujoco_warp's constraint solver hit its iteration limit ({', '.join(names)}) "
-                                       f"in float32: compare with the C run (vs_mujoco_c)")
+            notes.append(f"mujoco_warp's constraint solver hit its iteration limit ({', '.join(names)}) in float32: "
+                         f"compare with the C run (vs_mujoco_c)")
         if lay.kind == "beam":
             diagnostics["segments"] = lay.n_segments
             diagnostics["chain_root"] = settings.option("chain_root", "middle")
+            diagnostics["mass_condition"] = mass_condition(scene, lay.n_segments, settings.options.rotary_inertia,
+                                                           settings.options.chain_root)
+            if settings.segments is None:
+                c_n = default_segments(scene, EngineSettings(options=(("chain_tol", settings.options.chain_tol),)))
+                if c_n > lay.n_segments:
+                    notes.append(f"chain capped at {lay.n_segments} segments for float32 (MAX_SEGMENTS, COND_LIMIT; "
+                                 f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}")
+        if notes:
+            diagnostics["validity"] = "; ".join(notes)
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
                          energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
@@ -327,18 +342,50 @@ def _contact_diag_approx(mujoco, model) -> float:
     return float(d.efc_diagA[rows[0]])
 
 
-def sized_segments(scene, chain_tol: float, rotary: str) -> int:
+@lru_cache(maxsize=32)
+def sized_segments(scene, chain_tol: float, rotary: str, root: str = "middle") -> int:
     """Segments of the Warp chain: the MuJoCo C chain's (its sizing, `engines.mujoco_.default_segments`, with
-    the C default rotary inertia "none", at `chain_tol`), capped at MAX_SEGMENTS[rotary] with the impact point
-    kept near a segment's centre. (Sizing the "section" chain itself would not converge: its rotary inertia
-    keeps its frequencies off the Euler-Bernoulli ones, so the sizing would run to any cap.)"""
-    from impactval.engines.chain import centred
+    the C default rotary inertia "none", at `chain_tol`), capped at MAX_SEGMENTS[rotary], then lowered in ~10 %
+    steps while the chain's joint-space mass matrix is beyond what float32 factorises (`mass_condition` above
+    COND_LIMIT); when capped, the N within 12 below the cap with the smallest model error, the shared sizing's
+    rule at its cap (engines.chain.segments_for). (Sizing the "section" chain itself would not
+    converge: its rotary inertia keeps its frequencies off the Euler-Bernoulli ones, so it runs to any cap.)"""
+    from impactval.engines.chain import MIN_SEGMENTS, centred
 
-    n = default_segments(scene, EngineSettings(options=(("chain_tol", chain_tol), ("rotary_inertia", "none"))))
+    from impactval.engines.chain import hencky_chain, model_error
+
+    c_n = n = default_segments(scene, EngineSettings(options=(("chain_tol", chain_tol), ("rotary_inertia", "none"))))
     cap = MAX_SEGMENTS[rotary]
-    if n > cap:
-        n = centred(scene.target.impact_at, cap - max(2, cap // 10), cap, cap)
+    while n > MIN_SEGMENTS:
+        if n > cap:
+            n = centred(scene.target.impact_at, cap - max(2, cap // 10), cap, cap)
+        if mass_condition(scene, n, rotary, root) <= COND_LIMIT:
+            break
+        cap = max(MIN_SEGMENTS, int(0.9 * n))
+    if n < c_n:     # capped: as the shared sizing at its cap, the N near the cap with the smallest model error
+        n = min(range(max(MIN_SEGMENTS, n - 12), n + 1),
+                key=lambda m: (model_error(scene, hencky_chain(scene.target, m, rotary)).largest, -m))
     return n
+
+
+@lru_cache(maxsize=64)
+def mass_condition(scene, n: int, rotary: str, root: str) -> float:
+    """Condition number of the chain model's joint-space mass matrix M(q0), diagonally scaled (the part a
+    Cholesky factorisation feels), from MuJoCo C in float64."""
+    import mujoco
+
+    from impactval.engines.chain import hencky_chain
+    from impactval.engines.mujoco_ import build_xml
+
+    xml, _ = build_xml(scene, EngineSettings(dt=1e-6, options=(("chain_root", root),)),
+                       hencky_chain(scene.target, n, rotary))
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    scale = 1.0 / np.sqrt(np.diag(mass))
+    return float(np.linalg.cond(mass * scale[:, None] * scale[None, :]))
 
 
 def _check_target(scene) -> None:
