@@ -148,6 +148,22 @@ def test_serial_chain_is_what_float32_cannot_solve(adapter, beam_scene):
     assert end.status != "ok" or abs(end.diagnostics["vs_mujoco_c"]["f_m"]) > 1e-2
 
 
+def test_chain_sized_like_c_unless_float32_cannot():
+    """The Warp chain takes MuJoCo C's N (worked beam 93) while its scaled cond(M) is within COND_LIMIT; the
+    heavy ball on the slender beam (C: 210 segments) is lowered to where float32 factorises it (measured:
+    scaled cond 5.8e7 at N = 110 grew energy; 64 chosen, 1.0e7)."""
+    from impactval.engines.mujoco_ import default_segments
+    from impactval.engines.mujoco_warp_ import COND_LIMIT, MAX_SEGMENTS, mass_condition, sized_segments
+
+    worked = impactval.load_scene("beam_ss_midspan")
+    assert sized_segments(worked, 5e-3, "section") == default_segments(worked) == 93
+    assert mass_condition(worked, 93, "section", "middle") <= COND_LIMIT
+    heavy = impactval.load_scene(UNSEEN / "heavy_wc_slender.toml")
+    n, c_n = sized_segments(heavy, 5e-3, "section"), default_segments(heavy)
+    assert n < c_n and mass_condition(heavy, n, "section", "middle") <= COND_LIMIT
+    assert mass_condition(heavy, min(c_n, MAX_SEGMENTS["section"]), "section", "middle") > COND_LIMIT
+
+
 def _plate_run(adapter, plate_scene, fraction: float):
     st = EngineSettings(dt=1e-6, options=(("compare_c", False),))
     lim = adapter.plan(plate_scene, adapter.check_settings(st)).dt_limit
