@@ -483,7 +483,7 @@ class ExudynAdapter(EngineAdapter):
             # of the initial residual at 100+ elements, where Newton's default relTol 1e-8 cannot be met (measured: the
             # solver aborts); 1e-6 is reached in two iterations and changes no metric (< 1e-5 %, tested)
             ti.newton.relativeTolerance = CABLE_NEWTON_RTOL
-            s.linearSolverType = exu.LinearSolverType.EigenSparse
+            s.linearSolver.solverType = exu.LinearSolverType.EigenSparse
         return s, getattr(exu.DynamicSolverType, SOLVERS[integrator])
 
     # ------------------------------------------------------------------ pieces
