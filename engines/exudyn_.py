@@ -632,6 +632,13 @@ def _reference_modes_structure(beam, n: int) -> _Structure:
     from impactval.reference.beams import beam_modes, beam_shapes
 
     modes = beam_modes(beam, n)
+    if getattr(beam, "theory", "euler-bernoulli") != "euler-bernoulli":
+        # Timoshenko modes (deflection and rotation fields): the body needs only their omega, modal masses and
+        # deflection at the contact, so it is built like a modal target (one contact node carries phi)
+        s = _given_modes_structure(modes.omega, modes.modal_mass, modes.phi, 0.5 * beam.height,
+                                   f"FFRF reduced-order beam, reference's {n} Timoshenko modes")
+        s.diagnostics.update(beam_model="reference-modes", continuum_frequencies=modes.omega.tolist(), modes=n)
+        return s
     xs = np.unique(np.concatenate([np.linspace(0.0, beam.length, 2 * n + 3), [beam.impact_x]]))
     k_contact = int(np.argmin(np.abs(xs - beam.impact_x)))
     xs[k_contact] = beam.impact_x
@@ -661,13 +668,19 @@ def _modal_target_structure(scene) -> _Structure:
     """A structure given by its modes (omega, modal mass, phi at the impact point) as an FFRF body:
     one contact node carries the shape values, two more nodes (no modal motion) keep the frame's
     inertia regular; reduced matrices are diag(m_n) and diag(m_n omega_n^2)."""
+    target = scene.target
+    return _given_modes_structure(target.omega, target.modal_mass, target.phi, scene.ball.radius,
+                                  f"FFRF reduced-order body, {len(target.omega)} given modes")
+
+
+def _given_modes_structure(omega, modal_mass, phi, r: float, model: str) -> _Structure:
+    """An FFRF body with the given omega [rad/s], modal masses [kg] and shape values phi at the contact
+    point, contact radius r [m]."""
     import scipy.sparse as sp
 
-    target = scene.target
-    omega = np.asarray(target.omega, float)
-    mm = np.asarray(target.modal_mass, float)
-    phi = np.asarray(target.phi, float)
-    r = scene.ball.radius
+    omega = np.asarray(omega, float)
+    mm = np.asarray(modal_mass, float)
+    phi = np.asarray(phi, float)
     nodes = np.array([[0.0, -r, 0.0], [r, -r, 0.0], [0.0, -r, r]])
     mass = sp.diags(np.full(9, 1.0)).tocsr()
     basis = np.zeros((9, len(omega)))
@@ -675,7 +688,7 @@ def _modal_target_structure(scene) -> _Structure:
     return _Structure(nodes=nodes, mass=mass, stiffness=sp.csr_matrix((9, 9)), mode_basis=basis, omega=omega,
                       mass_reduced=np.diag(mm), stiffness_reduced=np.diag(mm * omega**2),
                       contact_nodes=np.array([0]), contact_weights=np.array([1.0]), phi_contact=phi.copy(),
-                      contact_point=nodes[0].copy(), radius=r, model=f"FFRF reduced-order body, {len(omega)} given modes",
+                      contact_point=nodes[0].copy(), radius=r, model=model,
                       diagnostics={"beam_model": "given-modes", "structure_frequencies": omega.tolist(),
                                    "continuum_frequencies": omega.tolist(), "modes": len(omega)})
 

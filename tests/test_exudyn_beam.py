@@ -246,3 +246,15 @@ def test_fem_is_an_alias_of_solid(adapter):
     for given, want in (("fem", "solid"), ("solid", "solid"), ("fe-beam", "fe-beam"), (None, "fe-beam")):
         opts = () if given is None else (("beam_model", given),)
         assert beam_model_of(sc, adapter.check_settings(EngineSettings(options=opts))) == want
+
+
+@requires_exudyn
+def test_reference_modes_on_a_timoshenko_scene(adapter):
+    """beam_model=reference-modes on a Timoshenko scene uses the Timoshenko reference's modes (regression: it
+    crashed comparing them with Euler-Bernoulli shapes) and is within 0.5 % of that reference."""
+    sc = impactval.load_scene("beam_ss_stubby_timoshenko")
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings(options=(("beam_model", "reference-modes"),)))
+    assert r.status == "ok", r.message
+    assert "Timoshenko" in r.model
+    assert np.all(np.abs(_rel(r, ref)) <= 5e-3), _rel(r, ref)
