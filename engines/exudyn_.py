@@ -1,4 +1,4 @@
-"""Exudyn adapter: rigid plate and beams as FFRF reduced-order (modal) bodies (issue 6).
+"""Exudyn adapter: rigid plate, ANCF cable beams and FFRF reduced-order (modal) bodies (issues 6, 11).
 
 Scene in Exudyn (y up, SI units): the ball is a `NodePoint` + `MassPoint` starting at first touch
 with velocity -v0 in y. The target is
@@ -7,20 +7,27 @@ with velocity -v0 in y. The target is
 - a modal target (kind "modal"): an FFRF body with the given omega, modal masses and phi;
 - a second ball (kind "ball"): another `NodePoint` + `MassPoint` (centre at y = -R2, moving at +v2); the
   contact (native `ObjectContactSphereSphere` or the injected spring-damper) joins the two centres;
-- a beam: an `ObjectFFRFreducedOrder` body whose floating frame is fixed to the ground by six
-  `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the impact
-  section's centroid (contact radius h/2, so the ball touches the top face). Two beam models,
-  option ("beam_model", ...):
-  * "fem" (default): modes of a solid finite-element model (triquadratic hexahedra assembled by
-    scikit-fem, supports as constrained DOFs, see `exudyn_fem`) handed to `exudyn.FEM.FEMinterface`;
-    the FE frequencies are reported next to the continuum's (diagnostics);
+- a beam, option ("beam_model", ...), default chosen from the scene's beam theory:
+  * "fe-beam" (default for theory = "euler-bernoulli"): an Euler-Bernoulli finite-element beam, a mesh of
+    Exudyn's `ObjectANCFCable2D` elements (planar Bernoulli-Euler ANCF cable, cubic Hermite, consistent
+    mass rho A) with the supports as `CoordinateConstraint`s; the contact is a `MarkerNodePosition` at the
+    impact node on the axis (contact radius h/2: the ball touches the top face). The element count is
+    sized from the scene (`exudyn_beam.elements_for`: the modes that matter within 0.5 * mode_tol in
+    frequency, then the mesh's model error within that too; option "beam_elements" fixes it);
+    implicit solvers use a sparse linear solver and Newton relTol 1e-6 (see _solver_settings);
+  * "solid" (default for theory = "timoshenko"; "fem" is its old name): an `ObjectFFRFreducedOrder`
+    body with the modes of a solid finite-element model (triquadratic hexahedra assembled by scikit-fem,
+    supports as constrained DOFs, see `exudyn_fem`) handed to `exudyn.FEM.FEMinterface`; its frame is
+    fixed by six `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the
+    impact section's centroid. 3-D elasticity is shear-deformable, like Timoshenko's beam;
   * "reference-modes": the reference's own modes (`reference.beams.beam_modes`: the same omega,
     modal masses and shape values at the contact) on a hand-made FEMinterface (nodes along the axis,
     lumped mass, `modeBasis` = the shapes; reduced mass and stiffness matrices set to the
     reference's diag(m_n) and diag(m_n omega_n^2)), so the difference to the reference with the same
-    modes is time integration alone.
-  `settings.modes` = number of beam modes (vertical bending modes for "fem"); default
-  `default_modes(scene)`.
+    modes is time integration alone (Timoshenko modes: one contact node carries phi).
+  `settings.modes` = number of beam modes for "solid" and "reference-modes" (default
+  `default_modes(scene)`); for "fe-beam" the number of modes the mesh must reproduce (default
+  required_modes(scene, mode_tol).count).
 
 Contact (`settings.contact`):
 - "native": Exudyn's own `ObjectContactSphereSphere` (active-set contact, impactModel 0, no damping)
@@ -40,10 +47,13 @@ Integrators (`settings.integrator`): "generalized-alpha" (default; spectral radi
 (Exudyn's TrapezoidalIndex2), "explicit-euler", "rk44", "rk67", and the automatic-step ones
 "dopri5" and "ode23" (settings.dt is the largest step; options "rtol" (default 1e-8) and "atol"
 (default rtol * 1e-3 * the plate's delta_m); tighter than rtol 1e-13 / atol 1e-18 is refused: the
-error test cannot be met in double precision and DOPRI5 never finishes). A solver that stops
+error test cannot be met in double precision and DOPRI5 never finishes; on the fe-beam mesh they are refused:
+DOPRI5 gave no result within 120 s on the worked beam). A solver that stops
 (exu.SolverError or a False return) becomes status "unstable" with Exudyn's message.
 The window starts at 2.5 rigid-plate contact times (+ tail) and is doubled (re-run) until the first
-contact has ended, up to 160 plate times.
+contact has ended, up to 160 plate times. `n_steps` and the stepping time count the steps up to the
+base rule's window (first contact's end + tail); every step Exudyn took, re-runs included, is in the
+diagnostics (`steps_simulated`, `step_s_simulated`).
 
 Settings always set (engines.md): console output off, no solution file, sensors stored internally
 every step, `discontinuous.useRecommendedStepSize = False` (else native contacts can abort with

@@ -41,8 +41,8 @@ from functools import lru_cache
 
 import numpy as np
 
-#: fewest elements of a mesh, and most (the linear model is dense: 1200 elements ~ 5k coordinates)
-MIN_ELEMENTS, MAX_ELEMENTS = 8, 1200
+#: fewest elements of a mesh, and most (the linear model is dense: 600 elements = 2404 coordinates, 46 MB a matrix)
+MIN_ELEMENTS, MAX_ELEMENTS = 8, 600
 #: the model error the mesh may have (relative, on each of t_m, f_m, delta_m), as a fraction of mode_tol
 TOL_FRACTION = 0.5
 #: reference tolerance for the model error (well below the tolerance the mesh is sized to)
