@@ -152,12 +152,14 @@ def test_default_row_within_two_percent(adapter, name):
     d = r.diagnostics
     assert max(abs(d[k]) for k in ("model_error_t_m", "model_error_f_m", "model_error_delta_m")) == r.model_error
     assert r.n_steps == len(r.t) - 1 <= d["steps_simulated"]
+    assert r.settings["segments"] == d["beam_elements"]          # the run table's N column
 
 
 @requires_exudyn
-@pytest.mark.parametrize("name", [os.path.basename(p) for p in EB_UNSEEN])
+@pytest.mark.parametrize("name", [os.path.basename(p) for p in UNSEEN])
 def test_reference_modes_within_half_percent(adapter, name):
-    """Issue 11 bar: --option exudyn.beam_model=reference-modes within 0.5 % of the converged reference."""
+    """Issue 11 bar: --option exudyn.beam_model=reference-modes within 0.5 % of the converged reference of the
+    scene's own theory (the heavy ball on the slender Timoshenko beam needs the 120-mode cap: +0.45 % in f_m)."""
     sc = impactval.load_scene(os.path.join(HERE, "unseen", name))
     ref = impactval.solve(sc, tol=1e-5)
     r = adapter.run(sc, EngineSettings(options=(("beam_model", "reference-modes"),)))
@@ -258,3 +260,17 @@ def test_reference_modes_on_a_timoshenko_scene(adapter):
     assert r.status == "ok", r.message
     assert "Timoshenko" in r.model
     assert np.all(np.abs(_rel(r, ref)) <= 5e-3), _rel(r, ref)
+
+
+@requires_exudyn
+@pytest.mark.slow
+def test_solid_on_the_heavy_slender_timoshenko_scene(adapter):
+    """The heavy WC ball on the slender beam in Timoshenko theory: the solid default (60 FE modes, 122 x 1 x 1
+    hex27; a ~90 s FE build under load, cached afterwards) within 2 % of the Timoshenko reference (measured
+    -1.03 / +1.88 / +1.25 %: its highest modes are stiffer than Timoshenko's, docs/exudyn.md)."""
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", "heavy_wc_slender_timoshenko.toml"))
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    assert r.diagnostics["beam_model"] == "solid"
+    assert np.all(np.abs(_rel(r, ref)) <= 0.02), _rel(r, ref)
