@@ -237,11 +237,14 @@ def test_mujoco_chain_numerics_shrink_with_dt_structure_stays(tmp_path):
 @pytest.mark.slow
 @requires_exudyn
 def test_exudyn_fe_beam_is_timoshenko_in_frequency_and_its_numerics_shrink(tmp_path):
-    """Exudyn's solid FE beam on the worked beam: its frequencies follow Timoshenko's, not
+    """Exudyn's solid FE beam (beam_model solid; the default on an Euler-Bernoulli scene is the
+    Euler-Bernoulli fe-beam) on the worked beam: its frequencies follow Timoshenko's, not
     Euler-Bernoulli's; its structure part stays while the numerics part shrinks with dt."""
+    from impactval.engines.base import EngineSettings
     from impactval.runner import run
 
-    df = run(["beam_ss_midspan"], ["exudyn"], dt=[1e-6, 2.5e-7], contact="hertz", out=tmp_path)
+    solid = EngineSettings(contact="hertz", options=(("exudyn.beam_model", "solid"),))
+    df = run(["beam_ss_midspan"], ["exudyn"], solid, dt=[1e-6, 2.5e-7], out=tmp_path)
     df = df.sort_values("dt", ascending=False)
     assert list(df["status"]) == ["ok"] * 2
     r = df.iloc[0]
@@ -254,6 +257,22 @@ def test_exudyn_fe_beam_is_timoshenko_in_frequency_and_its_numerics_shrink(tmp_p
         assert np.ptp(st) == 0.0 and n[1] < n[0] / 4, (m, n)
     # its structure part has the sign of the theory gap on every metric (shear and rotary inertia)
     assert all(np.sign(r[f"structure_err_{m}"]) == np.sign(r[f"theory_gap_{m}"]) for m in METRICS)
+
+
+def test_exudyn_default_fe_beam_is_euler_bernoulli_in_frequency_and_structure(tmp_path):
+    """The default Exudyn beam on an Euler-Bernoulli scene (the fe-beam, Exudyn's ANCF cable elements):
+    its first frequencies follow Euler-Bernoulli's, not Timoshenko's, and its structure part is far
+    below the scene's theory gap."""
+    from impactval.runner import run
+
+    df = run(["beam_ss_midspan"], ["exudyn"], dt=1e-6, contact="hertz", out=tmp_path)
+    r = df.iloc[0]
+    assert r["status"] == "ok", r["message"]
+    s, eb, tim = (np.array(json.loads(r[k])[:4]) for k in ("structure_frequencies", "continuum_frequencies",
+                                                             "timoshenko_frequencies"))
+    assert np.max(np.abs(s / eb - 1)) < 0.002 < 0.005 < np.max(np.abs(s / tim - 1))
+    for m in METRICS:
+        assert abs(r[f"structure_err_{m}"]) < abs(r[f"theory_gap_{m}"]) / 10, m
 
 
 @requires_mjw
