@@ -477,18 +477,13 @@ class SteppingAdapter(EngineAdapter):
         try:
             build_s = time.perf_counter() - t0
             freqs = np.asarray(self.frequencies(model), float)
+            # per-step work kept small (benchmarks/bench_sweep_overhead.py counts it): locals instead of
+            # attribute and global lookups, one tuple per step, the sample time rebuilt from k afterwards
             cols: list[tuple[float, ...]] = []
+            append = cols.append
             step, contact, energy, kin, observe = self.step, self.contact, self.energy, self.kinematics, self.observe
-            clock = time.perf_counter
-
+            clock, isfinite = time.perf_counter, math.isfinite
             lag = self.sample_lag
-
-            def sample(k: int) -> tuple[float, float, float]:
-                observe(model)          # not timed: the stepping time is the engine's step alone
-                d, f = contact(model)
-                e = energy(model)
-                cols.append(((k - lag) * dt, d, f, *kin(model), e))
-                return d, f, e
 
             step_s, k = 0.0, 0
             if lag:                # the first step's report describes the initial state
@@ -496,18 +491,26 @@ class SteppingAdapter(EngineAdapter):
                 step(model)
                 step_s += clock() - ts
                 k = 1
-            _, _, e0 = sample(k)
-            touched, t_end, stop = False, math.inf, ""
+            k_first = k
+            observe(model)          # not timed: the stepping time is the engine's step alone
+            d, f = contact(model)
+            e0 = energy(model)
+            append((d, f, *kin(model), e0))
+            e_stop = STOP_ENERGY_FACTOR * e0
+            touched, ended, stop = False, False, ""
             while k < n_max:
                 ts = clock()
                 step(model)
                 step_s += clock() - ts
                 k += 1
-                d, f, e = sample(k)
-                if not (math.isfinite(d) and math.isfinite(f) and math.isfinite(e)):
+                observe(model)
+                d, f = contact(model)
+                e = energy(model)
+                append((d, f, *kin(model), e))
+                if not (isfinite(d) and isfinite(f) and isfinite(e)):
                     stop = "nan"
                     break
-                if e > STOP_ENERGY_FACTOR * e0:
+                if e > e_stop:
                     stop = "energy"
                     break
                 if d > through:
@@ -515,12 +518,13 @@ class SteppingAdapter(EngineAdapter):
                     break
                 if f > 0:
                     touched = True
-                elif touched and d <= 0 and t_end == math.inf:
-                    t_end = (k - lag) * dt
+                elif touched and d <= 0 and not ended:
+                    ended = True
                     n_max = min(n_max, k + int(math.ceil(settings.tail / dt)))
-            arr = np.asarray(cols, float).reshape(-1, 7)
-            sim = Simulation(t=arr[:, 0], delta=arr[:, 1], f=arr[:, 2], x_ball=arr[:, 3], x_structure=arr[:, 4],
-                             v_ball=arr[:, 5], energy=arr[:, 6], build_s=build_s, step_s=step_s, n_steps=k,
+            arr = np.asarray(cols, float).reshape(-1, 6)
+            t = (np.arange(k_first, k_first + len(arr)) - lag) * dt
+            sim = Simulation(t=t, delta=arr[:, 0], f=arr[:, 1], x_ball=arr[:, 2], x_structure=arr[:, 3],
+                             v_ball=arr[:, 4], energy=arr[:, 5], build_s=build_s, step_s=step_s, n_steps=k,
                              model=self.describe(model), stop=stop, frequencies=freqs)
         finally:
             self.close(model)

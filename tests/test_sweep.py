@@ -343,9 +343,19 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
         assert reruns[setting] < c["under"], (setting, reruns[setting], c["under"])
 
 
+UNSEEN_CC = str(Path(__file__).parent / "unseen" / "cc_aluminium_0p3.toml")
+
+
 @requires_mujoco
 @pytest.mark.slow
-def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_path):
+@pytest.mark.parametrize("scene_ref, grid, n_cells, kill_after", [
+    # fine steps (up to ~14000 per cell) so the cells do not all finish within one poll
+    ("plate_steel", ["--dt", "4e-8:5e-9:8", "--integrator", "Euler,implicitfast,RK4"], 24, 6),
+    # an unseen scene (clamped-clamped aluminium beam hit at 0.3 L): dt x integrator x segments
+    (UNSEEN_CC, ["--dt", "4e-8:1e-8:3", "--integrator", "Euler,RK4", "--segments", "21,41"], 12, 3),
+])
+def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_path, scene_ref, grid, n_cells,
+                                                                          kill_after):
     """Issue 13 bar: SIGKILL the whole sweep (parent and engine workers) after some cells, rerun the
     same command: every cell of the grid is stored exactly once, the finished ones were reused (not
     run again) and only the rest ran."""
@@ -357,10 +367,8 @@ def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_pat
     import time
 
     out = tmp_path / "sw"
-    # fine steps (up to ~14000 per cell) so the cells do not all finish within one poll
-    cmd = [sys.executable, "-m", "impactval.cli", "sweep", "plate_steel", "--engines", "mujoco", "--dt",
-           "4e-8:5e-9:8", "--integrator", "Euler,implicitfast,RK4", "-j", "1", "--out", str(out), "--no-plot"]
-    n_cells = 24
+    cmd = [sys.executable, "-m", "impactval.cli", "sweep", scene_ref, "--engines", "mujoco", *grid, "-j", "1",
+           "--out", str(out), "--no-plot"]
     db = out / "impactval.sqlite"
 
     def stored() -> int:
@@ -378,10 +386,10 @@ def test_sweep_killed_halfway_and_restarted_runs_every_cell_exactly_once(tmp_pat
         done = 0
         while time.monotonic() < deadline and proc.poll() is None:
             done = stored()
-            if done >= 6:
+            if done >= kill_after:
                 break
             time.sleep(0.1)
-        assert proc.poll() is None and 6 <= done < n_cells, f"sweep ended or stalled ({done} cells)"
+        assert proc.poll() is None and kill_after <= done < n_cells, f"sweep ended or stalled ({done} cells)"
         os.killpg(proc.pid, signal.SIGKILL)
     finally:
         if proc.poll() is None:
