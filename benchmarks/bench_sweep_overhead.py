@@ -185,6 +185,15 @@ def _driver() -> None:
     Path(sys.argv[2]).write_text(json.dumps(manifest))
 
 
+def _warm_up() -> None:
+    """One job per case (natively): fills the caches the callgrind driver then finds (numba's, generic CPU)."""
+    import impactval
+    from impactval.engines.base import execute_job
+
+    for engine, scene, segments, dts, _, _ in CASES:
+        execute_job(engine, impactval.load_scene(scene), _settings(dts[0], segments))
+
+
 def instructions(script: str = __file__) -> list[dict]:
     """Per case: instructions per step of each loop (difference between the job's two step counts).
     `script` runs the driver (`script --driver MANIFEST`; another one can patch the code under test first)."""
@@ -196,7 +205,12 @@ def instructions(script: str = __file__) -> list[dict]:
         cmd = ["valgrind", "--tool=callgrind", "--collect-atstart=no", "--toggle-collect=sys_call_tracing",
                "--dump-after=sys_call_tracing", f"--callgrind-out-file={tmp}/cg.out", sys.executable, script,
                "--driver", str(manifest_path)]
-        env = {**os.environ, "PYTHONHASHSEED": "0"}
+        # numba's cache (the reference kernels the beam plans use) is keyed by CPU; valgrind's emulated CPU
+        # would miss it and compile for many minutes inside the run: both runs use the generic target, and a
+        # native warm-up fills that cache first. One BLAS thread (no spinning threads under valgrind).
+        env = {**os.environ, "PYTHONHASHSEED": "0", "NUMBA_CPU_NAME": "generic", "OPENBLAS_NUM_THREADS": "1",
+               "OMP_NUM_THREADS": "1"}
+        subprocess.run([sys.executable, __file__, "--warm-up"], env=env, check=True, capture_output=True)
         proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if proc.returncode != 0 or not manifest_path.exists():
             raise SystemExit(f"callgrind driver failed:\n{proc.stderr[-3000:]}")
@@ -300,6 +314,8 @@ def main(repeats: int = 5, callgrind: bool = True, wall: bool = True) -> dict:
 if __name__ == "__main__":
     if len(sys.argv) > 2 and sys.argv[1] == "--driver":
         _driver()
+    elif len(sys.argv) > 1 and sys.argv[1] == "--warm-up":
+        _warm_up()
     else:
         args = [a for a in sys.argv[1:] if not a.startswith("--")]
         main(int(args[0]) if args else 5, callgrind="--no-callgrind" not in sys.argv, wall="--no-wall" not in sys.argv)
