@@ -32,44 +32,10 @@ LIMIT_S = 90.0
 LIMIT_RSS_KB = 4 * 1024 * 1024
 NONFINITE = re.compile(r"(?<![A-Za-z_/])(nan|NaN|-?inf|-?Infinity)(?![A-Za-z_])")
 
-GOOD_BEAM = """\
-name = "hostile"
-[ball]
-radius = 0.01
-velocity = 1.0
-material = "steel"
-[target]
-kind = "beam"
-material = "steel"
-support = "simply-supported"
-length = 0.5
-width = 0.01
-height = 0.01
-impact_at = 0.5
-"""
-GOOD_MODAL = """\
-name = "hostile_modal"
-[ball]
-radius = 0.01
-velocity = 1.0
-material = "steel"
-[target]
-kind = "modal"
-material = "steel"
-omega = [30000.0, 120000.0]
-modal_mass = [0.5, 0.8]
-phi = [1.0, 0.7]
-"""
-GOOD_PLATE = """\
-name = "hostile_plate"
-[ball]
-radius = 0.01
-velocity = 1.0
-material = "steel"
-[target]
-kind = "rigid-plate"
-material = "steel"
-"""
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from hostile_cases import BEAM, MODAL, PLATE, named  # noqa: E402 - the scene fixtures the tests use
+
+GOOD_BEAM, GOOD_MODAL, GOOD_PLATE = named(BEAM, "hostile"), named(MODAL, "hostile_modal"), named(PLATE, "hostile_plate")
 
 
 @dataclass
@@ -338,6 +304,15 @@ def cli_cases(d: Path) -> list[Case]:
         Case("run --dt 1e-10 plate (slow)", ["run", "plate_steel", "--engines", "mujoco", "--dt", "1e-10", "--out",
                                               str(d / "r6"), "--timeout", "600"], "either", owner="engines-v2"),
     ]
+    # the one range grammar a:b:n of sweep --dt, tune --speeds and extremes --axis: every bad form refused there
+    for text in ("1:2", "1:2:1", "1:10:1e9", "0:1:3", "1:1:3", "nan:1:3", "1e999:1:3", "1:2:x", "a,b", "-1", ","):
+        for cmd, option, args in (
+                ("sweep", "--dt", ["sweep", "plate_steel", "--dt", text, "--out", str(d / "sw")]),
+                ("tune", "--speeds", ["tune", "mujoco", "plate_steel", "--speeds", text, "--out", str(d / "tu")]),
+                ("extremes", "--axis", ["extremes", "plate_steel", "--axis", f"velocity={text}", "--out", str(d / "ex")])):
+            cases.append(Case(f"{cmd} {option} {text}", args, "refuse", option))
+    cases.append(Case("extremes --axis old LO..HI:N", ["extremes", "plate_steel", "--axis", "velocity=0.1..10:5", "--out",
+                                                      str(d / "ex")], "refuse", "velocity=0.1:10:5"))
     return cases
 
 

@@ -303,16 +303,14 @@ def _parse_options(items: tuple[str, ...]) -> tuple[tuple[str, object], ...]:
 
 
 def _parse_dts(text: str) -> list:
-    """--dt: "auto" (each engine picks), one time step or a comma-separated list [s]."""
+    """--dt: "auto" (each engine picks), or time steps [s]: a comma list of values and ``a:b:n`` log ranges
+    (the one range grammar of sweep, tune and extremes, `impactval.ranges`)."""
+    from impactval.ranges import parse_list
+
     if str(text).strip().lower() == "auto":
         return ["auto"]
-    try:
-        dts = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise ImpactvalError(f"--dt takes time steps in s, comma-separated (e.g. 1e-6,5e-7), got {text!r}.") from None
-    if not dts:
-        raise ImpactvalError("--dt: give at least one time step in s.")
-    return [check_run_number("--dt", x) for x in dts]
+    dts = parse_list(text, "--dt", unit="s", example="1e-6,5e-7 or 1e-5:1e-7:3")
+    return [check_run_number("--dt", x) for x in dict.fromkeys(dts)]
 
 
 def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, options=()):
@@ -328,7 +326,7 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
               help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
 @click.option("--dt", default="auto", show_default=True,
               help="Engine time step [s], or auto (each engine picks a step under its predicted stability limit); "
-                   "several, comma-separated (1e-6,5e-7,2e-7), sweep speed against accuracy.")
+                   "several, comma-separated (1e-6,5e-7,2e-7) or a log range a:b:n (1e-5:1e-7:5), sweep speed against accuracy.")
 @click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]),
               help="hertz: exact law injected; native: engine contact as the linear spring k0; "
                    "native-hertz: engine contact shaped toward Hertz.")

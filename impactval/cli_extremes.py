@@ -28,7 +28,7 @@ def parse_under(text: str) -> float:
               help="Comma-separated engines (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
 @click.option("--axis", "axes", multiple=True, metavar="NAME[=SPEC]",
               help="dt, velocity, mass_ratio, stiffness, frequency_ratio or a TOML path (ball.velocity, target.height); "
-                   "SPEC = LO..HI[:N] | a,b,c (dt may use t_m: t_m/1e4..t_m:13). Once or twice.")
+                   "SPEC = a:b:n (n log-spaced values) | a,b,c | a mix (dt may use t_m: t_m/1e4:t_m:13). Once or twice.")
 @click.option("--under", default="1%", show_default=True, help="A cell is ok when every |error| is under this.")
 @click.option("--dt", default="auto", show_default=True, help="Time step [s] when dt is not an axis (auto: engine picks).")
 @click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]))
@@ -60,7 +60,7 @@ def extremes(scene, engines, axes, under, dt, contact, integrator, segments, opt
     from impactval.reports.extremes import safe_region, write
 
     if not axes:
-        raise ImpactvalError("give at least one --axis (e.g. --axis dt or --axis velocity=1e-3..1e2).")
+        raise ImpactvalError("give at least one --axis (e.g. --axis dt or --axis velocity=1e-3:1e2:11).")
     sc = impactval.load_scene(scene)
     ref = impactval.solve(sc, tol=tol)
     t_m = ref.t_m if ref.success and math.isfinite(ref.t_m) else None
@@ -71,13 +71,14 @@ def extremes(scene, engines, axes, under, dt, contact, integrator, segments, opt
     names = [e.strip() for e in engines.split(",") if e.strip()]
     df = run_map(sc, names, parsed, settings=settings, under=parse_under(under), tol=tol, store=db, workers=jobs,
                  force=force, progress=make_progress("auto"), unguarded=not guarded, out=out,
-                 command="extremes " + " ".join([scene, "--engines", engines, *(f"--axis {a}" for a in axes)]))
+                 command="extremes " + " ".join([scene, "--engines", engines, *(f"--axis {a}" for a in axes)]),
+                 reference=ref)
     pred = None
     if predictability:
         dts = sorted({float(x) for x in df["dt"] if isinstance(x, float) and math.isfinite(x)})
         segs = [int(x) for x in df.get("segments", []) if str(x).isdigit()]
         pred = predict_fn(sc, names, dts, settings=settings, tol=tol, store=db, workers=jobs,
-                          segments=segments or (min(segs) if segs else None))
+                          segments=segments or (min(segs) if segs else None), reference=ref if ref.success else None)
     md = write(df, out, pred)
     for line in safe_region(df):
         click.echo(line)

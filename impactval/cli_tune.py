@@ -18,7 +18,7 @@ from impactval.errors import ImpactvalError
 @click.argument("engine")
 @click.argument("scene")
 @click.option("--speeds", default="0.1:10:5", show_default=True,
-              help="Approach speeds [m/s]: 'a:b:n' (n speeds, geometric) or 'v1,v2,...'.")
+              help="Approach speeds [m/s]: 'a:b:n' (n speeds log-spaced from a to b), 'v1,v2,...' or a mix.")
 @click.option("--contact", default="native", show_default=True, type=click.Choice(["native", "native-hertz"]),
               help="native: a linear spring (the best compromise over the speeds); native-hertz: a Hertz-shaped law "
                    "(MuJoCo solimp shape, Exudyn exponent 1.5).")

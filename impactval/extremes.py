@@ -8,7 +8,7 @@ scene (a frozen dataclass replaced field by field, then checked like a loaded sc
 axis                      what it sets                                           default values
 ========================  =====================================================  ==================
 ``dt``                    the time step [s]; values may be written in the base   t_m/1e4 .. t_m,
-                          scene's reference contact time, e.g. ``t_m/1e4..t_m``  13 log-spaced
+                          scene's reference contact time: ``t_m/1e4:t_m:13``   13 log-spaced
 ``velocity``              the approach speed v0 [m/s] (= ``ball.velocity``)      1e-3 .. 1e2, 11
 ``mass_ratio``            ball mass / structure mass (the ball's mass is set)    1e-3 .. 1e2, 11
 ``stiffness``             the elastic constants (E, nu) of the ball and the      pmma .. tungsten-
@@ -22,8 +22,10 @@ axis                      what it sets                                          
 ``target.FIELD``          (``ball.radius``, ``target.height``, ``target.impact_at``)
 ========================  =====================================================  ==================
 
-SPEC: ``LO..HI`` (9 values, log-spaced when LO > 0 and HI/LO >= 10, else linear), ``LO..HI:N``, a
-comma list ``a,b,c`` (material names on the stiffness axis), or nothing for the default.
+SPEC: a comma list of values and ``a:b:n`` ranges (n values log-spaced from a to b, the one range
+grammar of `impactval.ranges`; material names on the stiffness axis), or nothing for the default.
+The old ``LO..HI[:N]`` is refused with a one-line error naming the a:b:n form (it was linear under a
+decade: read silently as a:b:n it would have changed a map's values).
 
 Every cell's reference is solved (a cell whose reference fails is ``no-reference``, its engines are
 not run); engine jobs go through `impactval.runner.execute` (result store, parallel workers,
@@ -40,6 +42,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Callable, Iterable, Sequence
 
+from impactval import ranges
 from impactval.errors import ImpactvalError
 from impactval.scenarios.materials import BUILTIN_MATERIALS, Material
 
@@ -100,16 +103,6 @@ _UNITS = {"radius": "m", "velocity": "m/s", "mass": "kg", "length": "m", "width"
           "thickness": "m", "impact_at": "", "modes": ""}
 
 
-def _grid(lo: float, hi: float, n: int) -> tuple[float, ...]:
-    import numpy as np
-
-    if n == 1:
-        return (float(lo),)
-    if lo > 0 and hi / lo >= 10:
-        return tuple(float(x) for x in np.geomspace(lo, hi, n))
-    return tuple(float(x) for x in np.linspace(lo, hi, n))
-
-
 def _number(name: str, token: str, t_m: float | None) -> float:
     """A value token: a number, or on the dt axis a multiple of the contact time ("t_m/1e4", "0.5*t_m")."""
     tok = token.strip().replace(" ", "")
@@ -121,15 +114,23 @@ def _number(name: str, token: str, t_m: float | None) -> float:
             raise ImpactvalError(f"--axis dt: cannot read {token!r}; write a time step in s or a multiple of the "
                                  f"contact time such as t_m/1e4, 0.5*t_m, t_m.")
         return float(m.group(1) or 1.0) * t_m / float(m.group(2) or 1.0)
-    try:
-        return float(tok)
-    except ValueError:
-        raise ImpactvalError(f"--axis {name}: {token!r} is not a number; SPEC is LO..HI, LO..HI:N or a,b,c.") from None
+    return float(tok)
+
+
+def _refuse_old_range(name: str, spec: str) -> None:
+    """LO..HI[:N] (before the one grammar): refused, naming the new form (its spacing differed: linear
+    under a decade)."""
+    rng, _, count = spec.partition(":")
+    lo, _, hi = rng.partition("..")
+    raise ImpactvalError(f"--axis {name}={spec}: LO..HI[:N] is no longer read; ranges are a:b:n (n log-spaced "
+                         f"values from a to b), e.g. --axis {name}={lo.strip()}:{hi.strip()}:{count.strip() if count.strip().isdigit() else 9}, "
+                         f"or give a list a,b,c.")
 
 
 def parse_axis(text: str, t_m: float | None = None) -> Axis:
     """An Axis from "NAME=SPEC" (or "NAME" for the default values); `t_m` [s] is the base scene's
-    reference contact time (the dt axis's default range and its "t_m" tokens)."""
+    reference contact time (the dt axis's default range and its "t_m" tokens). SPEC is a comma list
+    of values and a:b:n ranges (`impactval.ranges`); on the stiffness axis also material names."""
     name, _, spec = str(text).partition("=")
     name, spec = name.strip(), spec.strip()
     m = _PATH.match(name)
@@ -137,53 +138,50 @@ def parse_axis(text: str, t_m: float | None = None) -> Axis:
         raise ImpactvalError(f"--axis {text!r}: unknown axis {name!r}; known: {', '.join(_NAMED_AXES)}, or a scene "
                              f"field by its TOML path such as ball.velocity, target.height.")
     unit = _NAMED_AXES.get(name, _UNITS.get(m.group(2), "") if m else "")
+    option = f"--axis {name}"
+    if ".." in spec:
+        _refuse_old_range(name, spec)
+    positive_only = name in _NAMED_AXES or (m and m.group(2) != "velocity" or m and m.group(1) == "ball")
+    read = dict(unit=unit, example=f"{name}=1e-3:1e2:11" if name != "dt" else "dt=t_m/1e4:t_m:13",
+                convert=lambda tok: _number(name, tok, t_m))
     if name == "stiffness":
         values: list[Any] = list(STIFFNESS_DEFAULT) if not spec else []
         for tok in (spec.split(",") if spec else []):
             tok = tok.strip()
             if tok in BUILTIN_MATERIALS:
                 values.append(tok)
-            else:
-                try:
-                    e = float(tok)
-                except ValueError:
-                    raise ImpactvalError(f"--axis stiffness: {tok!r} is neither a material "
-                                         f"({', '.join(BUILTIN_MATERIALS)}) nor a Young's modulus in Pa.") from None
-                if not (math.isfinite(e) and e > 0):
-                    raise ImpactvalError(f"--axis stiffness: a Young's modulus must be positive, got {tok!r}.")
-                values.append(e)
+            elif tok and not ranges.is_range(tok) and not _is_float(tok):
+                raise ImpactvalError(f"--axis stiffness: {tok!r} is neither a material "
+                                     f"({', '.join(BUILTIN_MATERIALS)}) nor a Young's modulus in Pa.")
+            elif tok:
+                values += ranges.parse_list(tok, option, **{**read, "example": "stiffness=1e9:1e13:5"})
+        if not values:
+            raise ImpactvalError("--axis stiffness: give at least one material or Young's modulus (e.g. "
+                                 "stiffness=pmma,steel,1e12 or stiffness=1e9:1e13:5).")
         return Axis(name, tuple(values), "Pa", True)
     if not spec:
         if name == "dt":
             if t_m is None:
                 raise ImpactvalError("--axis dt: the default range needs the reference contact time t_m.")
-            values = list(_grid(t_m / 1e4, t_m, 13))
+            values = ranges.log_range(t_m / 1e4, t_m, 13)
         elif name in _DEFAULT_RANGES:
-            values = list(_grid(*_DEFAULT_RANGES[name]))
+            values = ranges.log_range(*_DEFAULT_RANGES[name])
         else:
-            raise ImpactvalError(f"--axis {name}: give values, e.g. --axis {name}=LO..HI or --axis {name}=a,b,c.")
-    elif ".." in spec:
-        rng, _, count = spec.partition(":")
-        lo_t, _, hi_t = rng.partition("..")
-        lo, hi = _number(name, lo_t, t_m), _number(name, hi_t, t_m)
-        try:
-            n = int(count) if count else 9
-        except ValueError:
-            raise ImpactvalError(f"--axis {name}: the count after ':' must be a whole number, got {count!r}.") from None
-        if not 1 <= n <= 200 or not hi > lo:
-            raise ImpactvalError(f"--axis {name}: need LO < HI and 1 <= N <= 200, got {spec!r}.")
-        values = list(_grid(lo, hi, n))
+            raise ImpactvalError(f"--axis {name}: give values, e.g. --axis {name}=a:b:n or --axis {name}=a,b,c.")
     else:
-        values = [_number(name, tok, t_m) for tok in spec.split(",") if tok.strip()]
-    if not values or not all(math.isfinite(v) for v in values):
-        raise ImpactvalError(f"--axis {name}: no finite values in {spec!r}.")
-    positive_only = name in _NAMED_AXES or (m and m.group(2) != "velocity" or m and m.group(1) == "ball")
-    if positive_only and min(values) <= 0:
-        raise ImpactvalError(f"--axis {name}: values must be positive, got {min(values)!r}.")
+        values = ranges.parse_list(spec, option, positive=bool(positive_only), **read)
     if name == "dt" and max(values) > DT_MAX:
         raise ImpactvalError(f"--axis dt: time steps must be <= {DT_MAX:g} s, got {max(values):g} s.")
     log = min(values) > 0 and max(values) / min(values) >= 10
     return Axis(name, tuple(sorted(set(values))), unit, log)
+
+
+def _is_float(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
 
 
 # ---------------------------------------------------------------------------- scene variants
@@ -358,7 +356,7 @@ def _settings_with(base, dt):
 
 def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=None, under: float = DEFAULT_UNDER,
             tol: float = 1e-6, store=None, workers: int | None = None, force: bool = False, progress=None,
-            unguarded: bool = True, out=None, command: str = "") -> "pd.DataFrame":
+            unguarded: bool = True, out=None, command: str = "", reference=None) -> "pd.DataFrame":
     """Run every engine in every cell of the grid; one row per (cell, engine).
 
     Parameters
@@ -371,6 +369,10 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
     tol : relative tolerance of the references
     store, workers, force, progress, out, command : see `impactval.runner.execute`
     unguarded : run an explicit dt past the predicted limit (impactval.unguarded) instead of refusing it
+    reference : the base scene's reference at `tol`, optional (when the caller has solved it already)
+
+    Each cell's reference is solved once, here, and handed to the runner with the jobs (never solved
+    twice; a base-scene cell reuses `reference`).
 
     Returns a DataFrame: `engine` (as given), one column per axis, `cell_status`, `status` (the run's),
     errors (signed fractions), `max_abs_err`, `dt` [s], the predicted `dt_limit`, `dt_contact`,
@@ -410,7 +412,7 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
             sc = dataclasses.replace(sc, name=cell_name(scene, axes, coords))
         cells.append((coords, sc, dt))
 
-    refs: dict[str, Any] = {}
+    refs: dict[str, Any] = {scene.name: reference} if reference is not None and reference.success else {}
     for _, sc, _ in cells:
         if sc.name not in refs:
             try:
@@ -431,8 +433,9 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
             meta.append((coords, sc, label, spec, st, lim, ref))
             if not isinstance(ref, str):
                 jobs.append(Job(sc, run_spec, st, tol))
+    solved = {sc.name: (sc, tol, refs[sc.name]) for _, sc, _ in cells if not isinstance(refs[sc.name], str)}
     rows = execute(jobs, store=store, workers=workers, force=force, progress=progress, out=out,
-                   command=command or f"extremes {scene.name}") if jobs else []
+                   command=command or f"extremes {scene.name}", references=solved.values()) if jobs else []
     rows_iter = iter(rows)
     out_rows = []
     for coords, sc, label, spec, st, lim, ref in meta:
@@ -583,11 +586,13 @@ def perturbations(scene, rel_v0: float = 1e-6, point_fraction: float = 0.1, segm
 
 def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, settings=None, tol: float = 1e-6,
                    jump: float = 1e-3, store=None, workers: int | None = None, rel_v0: float = 1e-6,
-                   point_fraction: float = 0.1, segments: int | None = None) -> "pd.DataFrame":
+                   point_fraction: float = 0.1, segments: int | None = None, reference=None) -> "pd.DataFrame":
     """Run each engine at each dt on the scene and its perturbations (`perturbations`); one row
     per (engine, dt, perturbation) with the engine's relative change of t_m, f_m, delta_m, the
     reference's, the contact counts, and `jumped`: a contact event gained or lost, or a metric
-    whose change differs from the reference's by more than `jump` (relative), or a status change."""
+    whose change differs from the reference's by more than `jump` (relative), or a status change.
+    `reference`: the scene's reference at `tol` when already solved; each reference is solved once
+    and handed to the runner."""
     import pandas as pd
 
     import impactval
@@ -599,7 +604,8 @@ def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, setti
     base = settings or EngineSettings()
     specs = [resolve_engine(e) for e in engines]
     perts = perturbations(scene, rel_v0, point_fraction, segments)
-    refs = {s.name: impactval.solve(s, tol=tol) for s in [scene, *(p.scene for p in perts)]}
+    scenes = [scene, *(p.scene for p in perts)]
+    refs = {s.name: reference if s is scene and reference is not None else impactval.solve(s, tol=tol) for s in scenes}
     jobs, keys = [], []
     for label, spec in zip(engines, specs):
         for dt in dts:
@@ -607,7 +613,8 @@ def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, setti
             for sc in [scene, *(p.scene for p in perts)]:
                 jobs.append(Job(sc, unguarded_spec(spec), st, tol))
                 keys.append((label, float(dt), sc.name))
-    rows = dict(zip(keys, execute(jobs, store=store, workers=workers, command=f"predictability {scene.name}")))
+    rows = dict(zip(keys, execute(jobs, store=store, workers=workers, command=f"predictability {scene.name}",
+                                  references=[(s, tol, refs[s.name]) for s in scenes])))
     out = []
     for label in engines:
         for dt in dts:

@@ -226,8 +226,10 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
 class _References:
     """Reference (and linear-theory) solutions, computed once per scene, tolerance and spring."""
 
-    def __init__(self) -> None:
-        self._ref: dict[tuple, ImpactResult] = {}
+    def __init__(self, known: Iterable[tuple[Any, float, ImpactResult]] = ()) -> None:
+        from impactval.jobs import canonical_scene
+
+        self._ref: dict[tuple, ImpactResult] = {(canonical_scene(sc), tol): r for sc, tol, r in known}
         self._lin: dict[tuple, ImpactResult | None] = {}
 
     def ref(self, job: Job) -> ImpactResult:
@@ -285,7 +287,8 @@ class _Signals:
 def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, workers: int | None = None,
             scheduler: Any = None, force: bool = False, progress: Any = None, out: str | Path | None = None,
             command: str = "", tag: str | None = None, keep_series: bool = False,
-            on_row: Callable[[dict[str, Any]], None] | None = None, run_id: str | None = None) -> list[dict[str, Any]]:
+            on_row: Callable[[dict[str, Any]], None] | None = None, run_id: str | None = None,
+            references: Iterable[tuple[Any, float, ImpactResult]] = ()) -> list[dict[str, Any]]:
     """Run engine jobs (reusing stored ones) and return one row per job, in the jobs' order.
 
     Parameters
@@ -306,6 +309,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         Called with each row dict as soon as it is stored.
     run_id : str, optional
         The run's id (default: a new UUID4).
+    references : iterable of (scene, tol, reference ImpactResult), optional
+        References the caller has solved already (not solved again for jobs of that scene and tol).
 
     Rows are dicts with the keys of `COLUMNS` (errors as signed fractions). Stored rows with a
     status in `REUSABLE_STATUSES` are reused (crashed and timeout rows are retried). Raises
@@ -334,7 +339,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
             todo[k] = j
     if progress is not None:
         progress.start(len(set(keys)), n_reused)
-    refs = _References()
+    refs = _References(references)
 
     def finish(k: str, res: ImpactResult, seconds: float) -> None:
         job = todo[k]

@@ -7,8 +7,12 @@ concurrent runs lose nothing) or any URL SQLAlchemy understands (`postgresql://.
 - `runs`: `id` (UUID text), `command`, `tag`, `out` (absolute --out directory or ""),
   `impactval_version`, `reference_version` (hash of the reference solver's source), `machine`,
   `python`, `started_at` / `ended_at` (UTC, ISO 8601 text), `status` (`RunStatus`: running,
-  finished, interrupted, failed; a run killed with SIGKILL stays "running" with no `ended_at`),
-  `n_jobs`, `n_reused` (jobs taken from the store), `n_failed`.
+  finished, interrupted, failed), `n_jobs`, `n_reused` (jobs taken from the store), `n_failed`,
+  `pid` and `host` of the process that runs it. A run killed with SIGKILL never says how it ended:
+  whenever a store is opened, a "running" run of this host whose process is gone (or whose pid now
+  belongs to a process started after the run) becomes "interrupted", `ended_at` left empty
+  (`Store.mark_dead_runs`). The two columns are added to an older store's runs table when it is
+  opened; its runs without a pid stay as they are.
 - `run_engines(run_id, engine, version)`: the version of each engine a run used.
 - `jobs`: keyed by `job_key` (see `impactval.jobs`); one column per row field of `COLUMN_TYPES`
   (SI units, errors as signed fractions), plus `engine_version`, `adapter_version`,
@@ -48,9 +52,9 @@ SCHEMA_VERSION = 3
 class RunStatus(str, enum.Enum):
     """How a run ended (the `runs.status` column)."""
 
-    RUNNING = "running"            # started; still running, or killed with SIGKILL (no ended_at)
+    RUNNING = "running"            # started; still running (or killed on another host: not checkable here)
     FINISHED = "finished"          # every job has a row
-    INTERRUPTED = "interrupted"    # stopped by Ctrl-C / SIGTERM; the finished jobs are stored
+    INTERRUPTED = "interrupted"    # stopped by Ctrl-C / SIGTERM, or its process found gone (SIGKILL: no ended_at)
     FAILED = "failed"              # the run itself raised (a bug or bad input found late)
 
     def __str__(self) -> str:
@@ -78,6 +82,42 @@ PERCENT_COLUMNS = ("err_t_m", "err_f_m", "err_delta_m", "err_curve", "lin_err_t_
 LIST_COLUMNS = ("structure_frequencies", "continuum_frequencies")
 #: results.csv / results.parquet columns, in order
 EXPORT_COLUMNS = tuple(f"{c}_pct" if c in PERCENT_COLUMNS else c for c in COLUMN_TYPES if c not in LIST_COLUMNS)
+
+
+#: columns of the runs table naming the process of a run (liveness of "running" runs)
+_RUN_PROCESS_COLUMNS = {"pid": _I, "host": _T}
+
+
+def process_alive(pid: int, started_at: str | None = None) -> bool:
+    """Whether process `pid` of this host may still be the one that started a run at `started_at`
+    (UTC ISO text): False when no such process exists, it is a zombie, or (Linux /proc) it started
+    more than 2 s after the run did (the pid was reused). True when it cannot be told (no /proc)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:       # exists, owned by another user
+        pass
+    except OverflowError:
+        return False
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        boot = next(float(line.split()[1]) for line in Path("/proc/stat").read_text().splitlines()
+                    if line.startswith("btime "))
+    except (OSError, StopIteration, ValueError):
+        return True
+    fields = stat[stat.rindex(")") + 2:].split()        # after "pid (comm) ": state is field 3 of stat(5)
+    if fields[0] in ("Z", "X"):
+        return False
+    if started_at:
+        try:
+            run_start = datetime.fromisoformat(str(started_at)).timestamp()
+        except ValueError:
+            return True
+        proc_start = boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")     # starttime, field 22
+        if proc_start > run_start + 2.0:
+            return False
+    return True
 
 
 def _utc() -> str:
@@ -162,7 +202,8 @@ class Store:
             sa.Column("tag", sa.Text), sa.Column("out", sa.Text), sa.Column("impactval_version", sa.Text),
             sa.Column("reference_version", sa.Text), sa.Column("machine", sa.Text), sa.Column("python", sa.Text),
             sa.Column("started_at", sa.Text), sa.Column("ended_at", sa.Text), sa.Column("status", sa.Text),
-            sa.Column("n_jobs", sa.Integer), sa.Column("n_reused", sa.Integer), sa.Column("n_failed", sa.Integer))
+            sa.Column("n_jobs", sa.Integer), sa.Column("n_reused", sa.Integer), sa.Column("n_failed", sa.Integer),
+            *(sa.Column(c, types[t]) for c, t in _RUN_PROCESS_COLUMNS.items()))
         self.run_engines = sa.Table(
             "run_engines", md, sa.Column("run_id", sa.String(36), sa.ForeignKey("runs.id"), primary_key=True),
             sa.Column("engine", sa.Text, primary_key=True), sa.Column("version", sa.Text))
@@ -192,6 +233,8 @@ class Store:
                     elif max(have) != STORE_SCHEMA_VERSION:
                         raise ImpactvalError(f"{self.url}: store schema {max(have)}, this impactval writes "
                                              f"{STORE_SCHEMA_VERSION}; use another --store.")
+                self._add_run_process_columns(sa)
+                self.mark_dead_runs()
                 return
             except sa.exc.OperationalError:
                 if attempt == 4:
@@ -226,7 +269,33 @@ class Store:
                                               set_={k: stmt.excluded[k] for k in values if k not in pk})
         return stmt.on_conflict_do_nothing(index_elements=pk)
 
+    def _add_run_process_columns(self, sa) -> None:
+        """A store written before runs had `pid` and `host`: add the columns (NULL for its old runs)."""
+        have = {c["name"] for c in sa.inspect(self.engine).get_columns("runs")}
+        missing = [c for c in _RUN_PROCESS_COLUMNS if c not in have]
+        if missing:
+            with self.engine.begin() as c:
+                for col in missing:
+                    kind = {_I: "INTEGER", _T: "TEXT"}[_RUN_PROCESS_COLUMNS[col]]
+                    guard = " IF NOT EXISTS" if self.engine.dialect.name == "postgresql" else ""   # two openers at once
+                    c.execute(sa.text(f"ALTER TABLE runs ADD COLUMN{guard} {col} {kind}"))
+
     # ------------------------------------------------------------------ runs
+    def mark_dead_runs(self) -> list[str]:
+        """Mark as interrupted every "running" run of this host whose process is gone (killed with
+        SIGKILL, or the machine rebooted); return their ids. Runs of other hosts, and runs of a live
+        process (this one included), are left alone."""
+        sa = _sa()
+        r = self.runs
+        q = sa.select(r.c.id, r.c.pid, r.c.started_at).where(r.c.status == str(RunStatus.RUNNING),
+                                                             r.c.host == socket.gethostname(), r.c.pid.is_not(None))
+        with self.engine.connect() as c:
+            dead = [row.id for row in c.execute(q) if not process_alive(int(row.pid), row.started_at)]
+        for run_id in dead:    # only if still "running": a run finishing meanwhile keeps its own status
+            self._write(lambda c, i=run_id: c.execute(r.update().where(r.c.id == i, r.c.status == str(RunStatus.RUNNING))
+                                                      .values(status=str(RunStatus.INTERRUPTED))))
+        return dead
+
     def begin_run(self, run_id: str, command: str, out: str | Path | None, engines: dict[str, str],
                   reference_version: str, tag: str | None = None, n_jobs: int = 0) -> None:
         """Record a new run (status running)."""
@@ -235,7 +304,8 @@ class Store:
         row = dict(id=run_id, command=command, tag=tag or "", out=str(Path(out).resolve()) if out else "",
                    impactval_version=impactval.__version__, reference_version=reference_version,
                    machine=machine(), python=sys.version.split()[0], started_at=_utc(), ended_at=None,
-                   status=str(RunStatus.RUNNING), n_jobs=n_jobs, n_reused=0, n_failed=0)
+                   status=str(RunStatus.RUNNING), n_jobs=n_jobs, n_reused=0, n_failed=0, pid=os.getpid(),
+                   host=socket.gethostname())
 
         def fn(c):
             c.execute(self.runs.insert().values(**row))

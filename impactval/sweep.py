@@ -17,20 +17,18 @@ the cost is its stepping wall time [s] (build excluded). Presentation lives in r
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, replace
 from typing import Any, Iterable
 
 import numpy as np
 import pandas as pd
 
+from impactval import ranges as _ranges
 from impactval.errors import ImpactvalError
 from impactval.jobs import Job as _RunJob
 
 #: the three metrics whose relative errors make a row's score
 METRICS = ("t_m", "f_m", "delta_m")
-#: a log-spaced range "a:b:n" (n values from a to b, both included, geometric spacing)
-_RANGE = re.compile(r"^\s*([^:]+):([^:]+):([^:]+)\s*$")
 #: local slopes of a power law over a fitted range stay within this much of the fitted order
 ORDER_SLOPE_SPREAD = 0.3
 #: a clean range has at least this many points (4 differences: 3 points agree by chance too often)
@@ -70,39 +68,20 @@ def _known_engines(engines: Iterable[str]) -> list[str]:
     return list(dict.fromkeys([*ENGINES, *engines]))
 
 
-def log_range(start: float, stop: float, n: int) -> list[float]:
-    """n values from `start` to `stop` (both included), equally spaced in log; 4 significant digits."""
-    vals = np.geomspace(start, stop, n)
-    return [float(f"{v:.4g}") for v in vals]
+#: n values from a to b (both included), log-spaced: the one range grammar (impactval.ranges)
+log_range = _ranges.log_range
+_DT_EXAMPLE = "1e-5:1e-8:12 or 1e-6,5e-7"
 
 
 def _parse_value(text: str, kind: str, field: str) -> list[Any]:
     """One item of an axis: 'auto', a log range a:b:n (dt only) or one value."""
     if text.lower() == "auto":
         return ["auto"]
-    m = _RANGE.match(text)
-    if m:
-        if kind != "float":
-            raise ImpactvalError(f"--{field}: ranges a:b:n are for time steps; give {field} as a list "
-                                 f"(e.g. 21,41,81), got {text!r}.")
-        try:
-            a, b, n = float(m[1]), float(m[2]), int(m[3])
-        except ValueError:
-            raise ImpactvalError(f"--{field}: a range is a:b:n with a, b in s and n a whole number of values "
-                                 f"(e.g. 1e-5:1e-8:12), got {text!r}.") from None
-        if not (a > 0 and b > 0 and n >= 2):
-            raise ImpactvalError(f"--{field}: in a:b:n, a and b must be positive and n >= 2 "
-                                 f"(e.g. 1e-5:1e-8:12), got {text!r}.")
-        return log_range(a, b, n)
+    if _ranges.is_range(text) and kind != "float":
+        raise ImpactvalError(f"--{field}: ranges a:b:n are for time steps; give {field} as a list "
+                             f"(e.g. 21,41,81), got {text!r}.")
     if kind == "float":
-        try:
-            v = float(text)
-        except ValueError:
-            raise ImpactvalError(f"--{field} takes time steps in s, a range a:b:n or auto "
-                                 f"(e.g. 1e-5:1e-8:12 or 1e-6,5e-7), got {text!r}.") from None
-        if not (math.isfinite(v) and v > 0):
-            raise ImpactvalError(f"--{field}: a time step must be a positive number of s, got {text!r}.")
-        return [v]
+        return _ranges.parse_list(text, f"--{field}", unit="s", example=_DT_EXAMPLE)
     if kind == "int":
         try:
             v = int(text)

@@ -59,32 +59,20 @@ STEPS_PER_SHORTEST_CONTACT = 2000
 # ---------------------------------------------------------------------------- speeds and scenes
 
 def parse_speeds(text: str | Sequence[float]) -> tuple[float, ...]:
-    """Approach speeds [m/s]: "a:b:n" (n speeds spaced geometrically from a to b) or "v1,v2,...".
+    """Approach speeds [m/s], sorted, each once: "a:b:n" (n speeds log-spaced from a to b, the one
+    range grammar of `impactval.ranges`), "v1,v2,..." or a mix; a sequence of numbers is taken as is.
 
     Raises ImpactvalError naming --speeds and the fix for anything else.
     """
-    if not isinstance(text, str):
-        vals = tuple(float(v) for v in text)
-    elif ":" in text:
-        parts = text.split(":")
-        try:
-            a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
-            if len(parts) != 3:
-                raise ValueError
-        except (ValueError, IndexError):
-            raise ImpactvalError(f"--speeds takes 'a:b:n' (n speeds from a to b m/s, geometric) or 'v1,v2,...', "
-                                 f"got {text!r}.") from None
-        if n < 1 or (n == 1 and a != b):
-            raise ImpactvalError(f"--speeds a:b:n needs n >= 2 (or a == b), got {text!r}.")
-        vals = (a,) if n == 1 else tuple(float(x) for x in np.geomspace(a, b, n)) if a > 0 and b > 0 else (a, b)
+    from impactval import ranges
+
+    if isinstance(text, str):
+        vals = ranges.parse_list(text, "--speeds", unit="m/s", example=DEFAULT_SPEEDS)
     else:
-        try:
-            vals = tuple(float(x) for x in text.split(",") if x.strip())
-        except ValueError:
-            raise ImpactvalError(f"--speeds takes 'a:b:n' or 'v1,v2,...' in m/s, got {text!r}.") from None
-    if not vals or not all(math.isfinite(v) and v > 0 for v in vals):
-        raise ImpactvalError(f"--speeds must be positive speeds in m/s, got {text!r}.")
-    return tuple(sorted(set(round(v, 12) for v in vals)))
+        vals = [ranges.number(v, "--speeds", unit="m/s", example=DEFAULT_SPEEDS) for v in text]
+        if not vals:
+            raise ImpactvalError(f"--speeds: give at least one speed (e.g. {DEFAULT_SPEEDS}).")
+    return tuple(sorted(set(vals)))
 
 
 def middle_speed(speeds: Sequence[float]) -> float:

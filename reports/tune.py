@@ -10,8 +10,6 @@ import math
 from pathlib import Path
 from typing import Any, Sequence
 
-#: line colours of the engines (a local table: reports/style.py is not on main yet)
-ENGINE_COLOURS = {"reference": "#000000", "mujoco": "#1f77b4", "pybullet": "#ff7f0e", "exudyn": "#2ca02c"}
 #: restitution coefficients the conversion table shows besides the user's own
 DEFAULT_RESTITUTIONS = (1.0, 0.9, 0.7, 0.5)
 
@@ -70,45 +68,46 @@ def restitution_rows(tuned: dict[str, Any], restitutions: Sequence[float]) -> li
     return rows
 
 
-def mujoco_snippet(tuned: dict[str, Any]) -> str:
-    p = tuned["parameters"]
-    solref = " ".join(p["solref"].split(","))
-    solimp = " ".join(p["solimp"].split(","))
-    return (f"<!-- impactval tune {tuned['scene']} ({tuned['contact']}): effective mass m_eff = {p['m_eff']:.9g} kg "
-            f"(1/efc_diagA of the contact row at first touch); solref is stiffness per unit m_eff [1/s^2] -->\n"
-            f"<option timestep=\"{tuned['dt']:g}\"><flag diagexact=\"enable\"/></option>\n"
-            f"<contact>\n  <pair geom1=\"BALL\" geom2=\"TARGET\" condim=\"1\" margin=\"0\" gap=\"0\"\n"
-            f"        solref=\"{solref}\" solimp=\"{solimp}\"/>\n</contact>")
-
-
-def pybullet_snippet(tuned: dict[str, Any]) -> str:
-    p = tuned["parameters"]
-    return (f"# impactval tune {tuned['scene']}: linear contact k = {p['k']:.6g} N/m\n"
-            f"# global route (nearly elastic; CFM holds for this dt only: globalCFM = ERP / (k dt)):\n"
-            f"p.setPhysicsEngineParameter(fixedTimeStep={tuned['dt']:g}, numSubSteps=0, contactSlop=0,\n"
-            f"                            contactERP={p['erp']:g}, globalCFM={p['cfm']:.9g})\n"
-            f"# per-body route (solved implicitly: loses energy, restitution ~ exp(-pi omega dt / 2)):\n"
-            f"p.changeDynamics(ball, -1, contactStiffness={p['k']:.9g}, contactDamping=0.0, restitution=0,\n"
-            f"                 lateralFriction=0, linearDamping=0, angularDamping=0)")
-
-
-def exudyn_snippet(tuned: dict[str, Any]) -> str:
-    p = tuned["parameters"]
-    return (f"# impactval tune {tuned['scene']}: f = {p['contact_stiffness']:.9g} * pen^{p['contact_exponent']:g}\n"
-            f"mbs.AddObject(exu.itemInterface.ObjectContactSphereSphere(\n"
-            f"    markerNumbers=[mTarget, mBall], nodeNumber=nData, spheresRadii=[R_target, R_ball],\n"
-            f"    contactStiffness={p['contact_stiffness']:.9g}, contactStiffnessExponent={p['contact_exponent']:g},\n"
-            f"    contactDamping=0.0, impactModel=0, dynamicFriction=0.0))")
+#: the ready-to-paste snippet of each engine: (language, template); the template's fields are the
+#: tuned.json "parameters" plus scene, contact, dt and the MuJoCo vectors as words (solref_words, solimp_words)
+SNIPPETS: dict[str, tuple[str, str]] = {
+    "mujoco": ("xml", """\
+<!-- impactval tune {scene} ({contact}): effective mass m_eff = {m_eff:.9g} kg (1/efc_diagA of the contact row at \
+first touch); solref is stiffness per unit m_eff [1/s^2] -->
+<option timestep="{dt:g}"><flag diagexact="enable"/></option>
+<contact>
+  <pair geom1="BALL" geom2="TARGET" condim="1" margin="0" gap="0"
+        solref="{solref_words}" solimp="{solimp_words}"/>
+</contact>"""),
+    "pybullet": ("python", """\
+# impactval tune {scene}: linear contact k = {k:.6g} N/m
+# global route (nearly elastic; CFM holds for this dt only: globalCFM = ERP / (k dt)):
+p.setPhysicsEngineParameter(fixedTimeStep={dt:g}, numSubSteps=0, contactSlop=0,
+                            contactERP={erp:g}, globalCFM={cfm:.9g})
+# per-body route (solved implicitly: loses energy, restitution ~ exp(-pi omega dt / 2)):
+p.changeDynamics(ball, -1, contactStiffness={k:.9g}, contactDamping=0.0, restitution=0,
+                 lateralFriction=0, linearDamping=0, angularDamping=0)"""),
+    "exudyn": ("python", """\
+# impactval tune {scene}: f = {contact_stiffness:.9g} * pen^{contact_exponent:g}
+mbs.AddObject(exu.itemInterface.ObjectContactSphereSphere(
+    markerNumbers=[mTarget, mBall], nodeNumber=nData, spheresRadii=[R_target, R_ball],
+    contactStiffness={contact_stiffness:.9g}, contactStiffnessExponent={contact_exponent:g},
+    contactDamping=0.0, impactModel=0, dynamicFriction=0.0))"""),
+}
 
 
 def snippet(tuned: dict[str, Any]) -> tuple[str, str]:
-    """(language, text) of the ready-to-paste snippet for the tuned engine."""
-    eng = tuned["engine"]
-    if eng == "mujoco":
-        return "xml", mujoco_snippet(tuned)
-    if eng == "pybullet":
-        return "python", pybullet_snippet(tuned)
-    return "python", exudyn_snippet(tuned)
+    """(language, text) of the ready-to-paste snippet for the tuned engine (see `SNIPPETS`)."""
+    lang, template = SNIPPETS[tuned["engine"]]
+    p = tuned["parameters"]
+    words = {f"{k}_words": " ".join(str(p[k]).split(",")) for k in ("solref", "solimp") if k in p}
+    return lang, template.format_map({**p, **words, "scene": tuned["scene"], "contact": tuned["contact"],
+                                      "dt": tuned["dt"]})
+
+
+def mujoco_snippet(tuned: dict[str, Any]) -> str:
+    """The MJCF snippet of a MuJoCo tuning (`snippet` for engine "mujoco")."""
+    return snippet({**tuned, "engine": "mujoco"})[1]
 
 
 def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_RESTITUTIONS,
@@ -184,10 +183,12 @@ def force_plot(tuned: dict[str, Any], series: dict[str, dict[float, dict]], refe
         return None
     speeds = tuned["speeds"]
     fig, axes = plt.subplots(1, len(speeds), figsize=(3.2 * len(speeds), 3.2), squeeze=False)
-    colour = ENGINE_COLOURS.get(tuned["engine"], "#1f77b4")
+    from impactval.reports.style import REFERENCE_COLOUR, engine_colour
+
+    colour = engine_colour(tuned["engine"])
     for ax, v in zip(axes[0], speeds):
         t, f = reference[v]
-        ax.plot(1e6 * t, f, color=ENGINE_COLOURS["reference"], lw=1.5, label="reference (Hertz)")
+        ax.plot(1e6 * t, f, color=REFERENCE_COLOUR, lw=1.5, label="reference (Hertz)")
         for which, style in (("before", ":"), ("after", "--")):
             s = series.get(which, {}).get(v)
             if s is not None:

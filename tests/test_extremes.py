@@ -36,19 +36,21 @@ def test_dt_axis_default_and_t_m_tokens():
     assert ax.values[0] == pytest.approx(t_m / 1e4) and ax.values[-1] == pytest.approx(t_m)
     ratios = [b / a for a, b in zip(ax.values, ax.values[1:])]
     assert max(ratios) == pytest.approx(min(ratios)) == pytest.approx(10 ** (4 / 12))
-    ax = parse_axis("dt=t_m/100..0.5*t_m:3", t_m)
+    ax = parse_axis("dt=t_m/100:0.5*t_m:3", t_m)
     assert ax.values == pytest.approx((4e-7, math.sqrt(4e-7 * 2e-5), 2e-5))
     assert parse_axis("velocity=2,0.5,1").values == (0.5, 1.0, 2.0)
-    assert parse_axis("target.height=0.01..0.02:3").values == pytest.approx((0.01, 0.015, 0.02))   # linear
+    assert parse_axis("target.height=0.01:0.04:3").values == (0.01, 0.02, 0.04)        # a:b:n is log-spaced
+    assert parse_axis("target.height=0.01,0.015,0.02").values == (0.01, 0.015, 0.02)  # linear: a list
     assert parse_axis("stiffness=pmma,1e13").values == ("pmma", 1e13)
 
 
 @pytest.mark.parametrize("text, match", [
-    ("speed=1..2", r"unknown axis 'speed'; known: dt, velocity"),
+    ("speed=1:2:3", r"unknown axis 'speed'; known: dt, velocity"),
     ("velocity=-1,2", r"values must be positive"),
-    ("dt=1e-3..1", r"time steps must be <= 0.01 s"),
+    ("dt=1e-3:1:3", r"time steps must be <= 0.01 s"),
     ("stiffness=rubber", r"'rubber' is neither a material"),
-    ("velocity=1..2:x", r"count after ':' must be a whole number"),
+    ("velocity=1:2:x", r"--axis velocity: in a:b:n, n is a whole number"),
+    ("velocity=1..2", r"LO..HI\[:N\] is no longer read; .* e.g. --axis velocity=1:2:9"),
     ("ball.radius", r"give values"),
 ])
 def test_bad_axis_is_one_line_error(text, match):
@@ -241,3 +243,34 @@ def test_report_names_a_loose_reference():
     assert "s[v=2]: reference uncertainty 0.05" in md and "s[v=1]: reference" not in md
     assert "- delta_m/R = 0.2" in md
     assert "e: ok (all errors under 1 %) for velocity in [1, 2] m/s." in md
+
+
+# ---------------------------------------------------------------------------- one solve per cell
+def _count_solves(monkeypatch) -> list[str]:
+    """Count impactval.solve calls in this process (extremes, the runner and the CLI all call it there)."""
+    calls: list[str] = []
+    real = impactval.solve
+
+    def counting(scene, **kw):
+        calls.append(getattr(scene, "name", str(scene)))
+        return real(scene, **kw)
+
+    monkeypatch.setattr(impactval, "solve", counting)
+    return calls
+
+
+def test_each_cell_reference_is_solved_once(monkeypatch, tmp_path):
+    """A 2 x 2 map (velocity x dt) has 2 cell scenes: 2 solves, the runner reuses them (it solved
+    each again before: 4); with --predictability the base scene and its 2 perturbations once each."""
+    scene = impactval.load_scene("plate_steel")
+    calls = _count_solves(monkeypatch)
+    df = run_map(scene, [FAKE], [parse_axis("velocity=0.5,2"), parse_axis("dt=1e-7,2e-7")], workers=1,
+                 store=tmp_path / "a.sqlite")
+    assert len(df) == 4 and set(df["status"]) == {"ok"}
+    assert sorted(calls) == ["plate_steel[velocity=0.5]", "plate_steel[velocity=2]"]
+    calls.clear()
+    res = CliRunner().invoke(impactval.cli.main, ["extremes", "plate_steel", "--engines", FAKE, "--axis", "dt=1e-7,2e-7",
+                                                  "--predictability", "-j", "1", "--out", str(tmp_path / "cli")])
+    assert res.exit_code == 0, res.output
+    # the CLI's t_m solve serves the map and the predictability runs; a plate has no impact-point perturbation
+    assert sorted(calls) == ["plate_steel", "plate_steel+dv0"], calls

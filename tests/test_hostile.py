@@ -22,6 +22,8 @@ from impactval.errors import ImpactvalError, SceneError
 from impactval.scenarios import limits
 from impactval.scenarios.scene import load_scene, scene_from_dict
 
+from hostile_cases import BEAM, MODAL, PLATE as BASE
+
 NONFINITE = re.compile(r"(?<![A-Za-z_/])(nan|NaN|-?inf|-?Infinity)(?![A-Za-z_])")
 CI = settings(max_examples=60, deadline=10_000, suppress_health_check=[HealthCheck.too_slow,
                                                                           HealthCheck.function_scoped_fixture],
@@ -218,21 +220,6 @@ def test_output_paths_checked_first(tmp_path_factory, path):
 
 
 # --------------------------------------------------------------------------- the named refusals
-BASE = """
-name = "x"
-[ball]
-radius = 0.01
-velocity = 1.0
-material = "steel"
-[target]
-kind = "rigid-plate"
-material = "steel"
-"""
-MODAL = BASE.replace('kind = "rigid-plate"', 'kind = "modal"') + \
-    "omega = [30000.0, 120000.0]\nmodal_mass = [0.5, 0.8]\nphi = [1.0, 0.7]\n"
-BEAM = BASE.replace('kind = "rigid-plate"', 'kind = "beam"') + \
-    'support = "simply-supported"\nlength = 0.5\nwidth = 0.01\nheight = 0.01\nimpact_at = 0.5\n'
-
 NAMED = [  # (scene text, field named in the refusal) - issue 18's list, then more
     (BASE.replace('material = "steel"\n[target]', 'material = "steel"\nmass = 1e300\n[target]'), "mass"),
     (BASE.replace("radius = 0.01", "radius = 1e300"), "radius"),

@@ -119,7 +119,7 @@ def test_a_killed_night_resumes_without_duplicates_or_recomputation(tmp_path):
         jobs = dict(c.execute("SELECT job_key, created_at FROM jobs").fetchall())
         linked = c.execute("SELECT count(*), count(DISTINCT job_key) FROM run_jobs WHERE run_id = ?",
                            (runs[-1][0],)).fetchone()
-    assert [r[2] for r in runs] == ["running", "finished"] and runs[0][1] == runs[1][1]    # same night resumed
+    assert [r[2] for r in runs] == ["interrupted", "finished"] and runs[0][1] == runs[1][1]  # same night resumed
     assert runs[1][3] == 1                                   # the finished job was reused ...
     assert {k: jobs[k] for k in before} == before            # ... not recomputed
     assert len(jobs) == 2 and linked == (2, 2)               # every job of the night once

@@ -99,7 +99,7 @@ def test_sigkill_halfway_then_rerun_runs_each_job_once(tmp_path):
         runs = c.execute("select status, n_reused from runs order by started_at").fetchall()
     assert len(rows) == 12 and {s for _, _, s in rows} == {"ok"}
     assert {k: t for k, t, _ in rows if k in first} == first       # finished jobs not recomputed
-    assert runs == [("running", 0), ("finished", len(first))]
+    assert runs == [("interrupted", 0), ("finished", len(first))]     # the rerun found the killed run gone
     csv = pd.read_csv(out / "results.csv")
     assert len(csv) == 12 and csv["job_key"].is_unique and sorted(csv["dt"]) == sorted(map(float, DTS.split(",")))
 

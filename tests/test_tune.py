@@ -41,7 +41,8 @@ def test_speeds_parse_and_refuse():
     assert T.parse_speeds("0.1:10:5") == pytest.approx((0.1, 10**-0.5, 1.0, 10**0.5, 10.0))
     assert T.parse_speeds("1,0.3") == (0.3, 1.0)
     assert T.middle_speed(T.parse_speeds("0.1:10:5")) == pytest.approx(1.0)
-    for bad in ("0.1:10", "a,b", "0:1:3", "-1", ""):
+    assert T.parse_speeds("1:0.01:3") == (0.01, 0.1, 1.0)          # either direction, exact decades
+    for bad in ("0.1:10", "a,b", "0:1:3", "-1", "", "1:2:1", "1:10:1e9", [], [0.0]):
         with pytest.raises(ImpactvalError, match="--speeds"):
             T.parse_speeds(bad)
 
