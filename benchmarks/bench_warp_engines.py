@@ -5,22 +5,28 @@ theory for native contact, the Hertz reference for injected Hertz), the C-vs-War
 build time (model + first step = kernel compile or cache load) apart from stepping time, and per-step
 cost with Warp CPU graph capture against plain kernel launches (ratios taken in the same run; the
 machine may be loaded, so compare within a run). Also the float32 caveat: plate native at dt down
-to 5e-8 for C and Warp. Several minutes; not a test.
+to 5e-8 for C and Warp; the worked and two unseen beams (MuJoCo C's own chain, the Warp chain with C on the
+identical model, Newton); the chain's tree root and size limits in float32; the first unstable dt on the
+plate (the energy measure). Several minutes; not a test.
 
 Run: python benchmarks/bench_warp_engines.py
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import impactval
 from impactval.engines.base import EngineSettings, load_adapter
 from impactval.reference.linear import solve_linear
+
+UNSEEN = Path(__file__).resolve().parent.parent / "tests" / "unseen"
 
 
 def line(engine: str, scene_name: str, **kw) -> None:
     sc = impactval.load_scene(scene_name)
     s = EngineSettings(**kw)
     r = load_adapter(engine).run(sc, s)
-    label = f"{engine:12s} {scene_name:16s} {s.contact:7s} {s.integrator or '-':13s} dt={s.dt:<7g} " \
+    label = f"{engine:12s} {Path(scene_name).stem:20s} {s.contact:7s} {s.integrator or '-':13s} dt={s.dt!s:<7} " \
             f"{dict(s.options) or ''}"
     if not r.success:
         print(f"{label} {r.status}: {r.message}", flush=True)
@@ -29,10 +35,12 @@ def line(engine: str, scene_name: str, **kw) -> None:
     err = [100 * (a / b - 1) for a, b in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m))]
     vs = r.diagnostics.get("vs_mujoco_c", {})
     vs_txt = " vs C %+.4f/%+.4f/%+.4f %%" % tuple(100 * vs[k] for k in ("t_m", "f_m", "delta_m")) if "t_m" in vs else ""
+    label += f" N={r.diagnostics['segments']} dt={r.dt:.3g}" if r.diagnostics.get("segments") else ""
     print(f"{label} {r.model}: err {err[0]:+.3f}/{err[1]:+.3f}/{err[2]:+.3f} % (t_m/f_m/delta_m vs "
           f"{'Hertz' if s.contact == 'hertz' else 'linear'} theory), energy {100 * r.energy_error:.2f} %, "
           f"build {r.wall_time_build_s:.2f} s (compile/load {r.diagnostics.get('compile_s', 0):.2f} s), "
-          f"step {1e6 * r.wall_time_step_s / max(r.n_steps, 1):.1f} us x {r.n_steps}{vs_txt}", flush=True)
+          f"step {1e6 * r.wall_time_step_s / max(r.n_steps, 1):.1f} us x {r.n_steps}{vs_txt}"
+          f"{' [' + r.diagnostics['validity'] + ']' if r.diagnostics.get('validity') else ''}", flush=True)
 
 
 def main() -> None:
@@ -48,15 +56,41 @@ def main() -> None:
         line("mujoco", "plate_steel", dt=dt, contact="native")
         line("mujoco-warp", "plate_steel", dt=dt, contact="native", options=(("compare_c", False),))
         line("newton", "plate_steel", dt=dt, contact="native")
+    beams = ("beam_ss_midspan", str(UNSEEN / "cantilever_titanium.toml"), str(UNSEEN / "cc_aluminium_0p3.toml"))
+    for beam in beams:
+        for contact in ("native", "hertz"):
+            line("mujoco", beam, dt="auto", contact=contact)                       # MuJoCo C's own chain
+            line("mujoco-warp", beam, dt="auto", contact=contact)                  # + C on the identical model
+        line("newton", beam, dt=1e-6 if "midspan" in beam else "auto", contact="native")
     for contact in ("native", "hertz"):
-        line("mujoco", "beam_ss_midspan", dt=1e-6, contact=contact, segments=51,
-             options=(("rotary_inertia", "section"),))          # the chain mujoco-warp builds
         line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact=contact)
         line("newton", "beam_ss_midspan", dt=1e-6, contact=contact)
     line("newton", "beam_ss_midspan", dt=1e-6, contact="native", options=(("attach_ke", 3e9),))
     line("newton", "beam_ss_midspan", dt=1e-6, contact="native", integrator="xpbd")
-    line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact="hertz", segments=81)
+    for root in ("end", "middle"):           # float32: the serial chain vs the tree rooted at its middle
+        line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact="hertz", segments=81, options=(("chain_root", root),))
+    for n in (121, 161):                     # the section chain's float32 limit
+        line("mujoco-warp", "beam_ss_midspan", dt="auto", contact="hertz", segments=n)
+    line("mujoco-warp", "beam_ss_midspan", dt="auto", contact="hertz", options=(("rotary_inertia", "none"),))
+    line("mujoco-warp", "beam_ss_midspan", dt="auto", contact="hertz", segments=93,
+         options=(("rotary_inertia", "none"),))
+    for engine in ("mujoco", "mujoco-warp", "newton"):   # the energy measure: first unstable dt on the plate
+        onset(engine)
 
+
+def onset(engine: str) -> None:
+    """First unstable dt on the plate (injected Hertz) on a 2^(1/4) grid from 0.35 dt_limit, as a fraction of it."""
+    sc = impactval.load_scene("plate_steel")
+    adapter = load_adapter(engine)
+    opts = (("compare_c", False),) if engine == "mujoco-warp" else ()
+    lim = adapter.plan(sc, adapter.check_settings(EngineSettings(dt=1e-6, options=opts))).dt_limit
+    for k in range(-6, 4):
+        frac = 2 ** (k / 4)
+        r = adapter.run(sc, EngineSettings(dt=float(f"{frac * lim:.4g}"), options=opts))
+        if not r.success:
+            print(f"{engine:12s} plate onset: first unstable dt = {frac:.3f} dt_limit ({r.message})", flush=True)
+            return
+    print(f"{engine:12s} plate onset: none up to {frac:.3f} dt_limit", flush=True)
 
 if __name__ == "__main__":
     main()

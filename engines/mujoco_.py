@@ -105,6 +105,10 @@ class MujocoOptions:
     solref: tuple[float, float] | None = option(None, "contact pair solref 'a,b' (positive: timeconst [s], dampratio; "
                                                 "negative: -stiffness, -damping per unit effective mass)", numbers(2))
     solimp: tuple[float, ...] | None = option(None, "contact pair solimp 'd0,dwidth,width,midpoint,power'", numbers(5))
+    chain_root: str = option("end", "segment the chain's kinematic tree starts from: 'end' (default: segment 0 on the "
+                             "support joints, a serial chain), 'hit' or 'middle' (a floating segment with two branches, "
+                             "supports as constraints: half the tree depth, a better-conditioned mass matrix)",
+                             one_of("end", "hit", "middle"))
 
 
 def default_segments(scene, settings: EngineSettings | None = None) -> int:
@@ -139,11 +143,20 @@ class _Layout:
         self.top = 0.0               # z of the target's contact point at rest [m]
         self.impact_x = 0.0
         self.n_modes = 0
+        self.root_segment = 0        # the chain segment the kinematic tree starts from
 
 
 
-def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool) -> tuple[str, str]:
-    """Worldbody chain and extra sections (equality, tendon) for the Hencky chain of a beam."""
+def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: str = "end") -> tuple[str, str]:
+    """Worldbody chain and extra sections (equality, tendon) for the Hencky chain of a beam.
+
+    root = "end": a serial tree from segment 0 (the supports as in the module docstring). root = "hit" or
+    "middle": the tree is rooted at the hit segment or the middle one (planar joints root_x, root_z, root_r
+    at its centre of mass) with two branches to the ends, so the tree depth is ~N/2 (a serial chain's
+    joint-space mass matrix gets ill-conditioned with its depth, see docs/mujoco-warp.md); the supports
+    become constraints: a `<connect>` pin at each supported end, the roller at x = 0 a small body on a
+    slide-x joint pinned to the world, a clamp's 2EI/l a fixed tendon over the joints whose sum is that
+    end segment's absolute rotation. The same beam model either way (node hinges EI/l, same masses)."""
     n, l = chain.n, chain.segment_length
     w, h = beam.width, beam.height
     k_hinge, k_clamp = chain.hinge_stiffness, chain.clamp_stiffness
@@ -156,6 +169,76 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool) -> tup
     lay.hinge_stiffness, lay.clamp_stiffness, lay.hit_segment = k_hinge, k_clamp, hit
     lay.top, lay.impact_x = h / 2.0, x_c
     support = beam.support
+    if root == "end":
+        return _serial_beam_xml(chain, lay, contact_geom, support, ixx, izz)
+    r = hit if root == "hit" else (n - 1) // 2
+    lay.root_segment = r
+
+    def segment(i: int, left: bool) -> str:
+        """Body i's inertial (and hit site); its frame is at its left end (root, right branch) or right end."""
+        x0 = -l if left else 0.0          # the segment spans [x0, x0 + l] in its frame
+        s = f'<inertial pos="{_vec(x0 + l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy, izz)}"/>'
+        if i == hit:
+            off = chain.hit_offset
+            s += f'<site name="hit" pos="{_vec(x0 + off, 0, h / 2)}" size="0.001"/>'
+            if contact_geom:
+                s += (f'<geom name="target" type="box" pos="{_vec(x0 + off, 0, 0)}" '
+                      f'size="{_vec(l / 2, w / 2, h / 2)}" contype="0" conaffinity="0" mass="0"/>')
+        return s
+
+    # the roller at x = 0 (simply supported, clamped-clamped): a body on a slide-x joint at node 0, pinned
+    # to the world below; its mass never moves (pinned), its rotary inertia is negligible
+    roller = ""
+    if support in ("simply-supported", "clamped-clamped"):
+        tiny = 1e-6 * iyy
+        roller = (f'<body name="roller0" pos="{_vec(-l if r > 0 else 0.0, 0, 0)}"><joint name="roller_x" type="slide" '
+                  f'axis="1 0 0"/><inertial pos="0 0 0" mass="{_fmt(m_seg)}" diaginertia="{_vec(tiny, tiny, tiny)}"/>'
+                  f'</body>')
+    # left branch: segments r-1 .. 0, each framed at its right end (node i+1), hinge h{i+1} there
+    left = ""
+    for i in range(r - 1, -1, -1):
+        pos = _vec(0.0, 0.0, 0.0) if i == r - 1 else _vec(-l, 0.0, 0.0)
+        left += (f'<body name="seg{i}" pos="{pos}"><joint name="h{i + 1}" type="hinge" axis="0 1 0" '
+                 f'stiffness="{_fmt(k_hinge)}"/>' + segment(i, True))
+        if i == 0:
+            left += roller
+    left += "</body>" * r
+    # right branch: segments r+1 .. n-1, each framed at its left end (node i), hinge h{i} there
+    right = ""
+    for i in range(r + 1, n):
+        right += (f'<body name="seg{i}" pos="{_vec(l, 0.0, 0.0)}"><joint name="h{i}" type="hinge" axis="0 1 0" '
+                  f'stiffness="{_fmt(k_hinge)}"/>' + segment(i, False))
+    right += "</body>" * (n - 1 - r)
+    c = _vec(l / 2, 0, 0)
+    chain_xml = (f'<body name="seg{r}" pos="{_vec(r * l, 0, 0)}">'
+                 f'<joint name="root_x" type="slide" axis="1 0 0" pos="{c}"/>'
+                 f'<joint name="root_z" type="slide" axis="0 0 1" pos="{c}"/>'
+                 f'<joint name="root_r" type="hinge" axis="0 1 0" pos="{c}"/>'
+                 + segment(r, False) + (roller if r == 0 else "") + left + right + "</body>")
+    eq, tendons = [], []
+    if support in ("simply-supported", "clamped-clamped"):
+        eq.append('<connect name="roller" body1="roller0" anchor="0 0 0"/>')
+    if support == "cantilever":
+        eq.append(f'<connect name="clamp" body1="seg0" anchor="{_vec(-l if r > 0 else 0.0, 0, 0)}"/>')
+    if support in ("simply-supported", "clamped-clamped"):
+        eq.append(f'<connect name="pin" body1="seg{n - 1}" anchor="{_vec(l, 0, 0)}"/>')
+    if support in ("clamped-clamped", "cantilever"):      # segment 0's absolute rotation: root_r + left hinges
+        joints = '<joint joint="root_r" coef="1"/>' + "".join(f'<joint joint="h{j}" coef="1"/>' for j in range(1, r + 1))
+        tendons.append(f'<fixed name="clamp_start" stiffness="{_fmt(k_clamp)}" springlength="0">{joints}</fixed>')
+    if support == "clamped-clamped":                      # segment n-1's: root_r + right hinges
+        joints = '<joint joint="root_r" coef="1"/>' + "".join(f'<joint joint="h{j}" coef="1"/>' for j in range(r + 1, n))
+        tendons.append(f'<fixed name="clamp_end" stiffness="{_fmt(k_clamp)}" springlength="0">{joints}</fixed>')
+    extra = (f'<equality>{"".join(eq)}</equality>' if eq else "") + (f'<tendon>{"".join(tendons)}</tendon>' if tendons else "")
+    return chain_xml, extra
+
+
+def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, support: str, ixx: float,
+                     izz: float) -> tuple[str, str]:
+    """root = "end": segment 0 on the supports' joints, the others in series (see the module docstring)."""
+    n, l = chain.n, chain.segment_length
+    w, h = chain.width, chain.height
+    k_hinge, k_clamp = chain.hinge_stiffness, chain.clamp_stiffness
+    m_seg, iyy, hit = chain.segment_mass, chain.rotary_inertia, chain.hit_segment
     parts, closes = [], []
     for i in range(n):
         pos = _vec(0.0, 0.0, 0.0) if i == 0 else _vec(l, 0.0, 0.0)
@@ -235,7 +318,7 @@ def build_xml(scene, settings: EngineSettings, chain: HenckyChain | None = None,
     elif target.kind == "beam":
         if chain is None:
             chain = hencky_chain(target, default_segments(scene, settings), settings.option("rotary_inertia", "none"))
-        world, extra = _beam_xml(target, chain, lay, native)
+        world, extra = _beam_xml(target, chain, lay, native, settings.option("chain_root", "end"))
     elif target.kind == "ball":
         world = _second_ball_xml(target, lay)
     else:

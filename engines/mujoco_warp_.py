@@ -12,17 +12,19 @@ Contact modes:
   impedance 1e-4, see engines/mujoco_.py);
 - "native-hertz": the MuJoCo adapter's fitted solimp shape (the fit runs in MuJoCo C).
 
-Model differences forced by float32 (measured, docs/mujoco-warp.md): the chain is capped at
-MAX_SEGMENTS = 51 and uses the section rotary inertia by default; `diagexact` is off (unsupported),
+Model differences forced by float32 (measured, docs/mujoco-warp.md): the chain's tree is rooted at its
+middle segment (option chain_root; supports become constraints, the same beam), it uses the section rotary
+inertia by default, and its N (the MuJoCo C chain's) is capped at MAX_SEGMENTS; `diagexact` is off (unsupported),
 the contact's direct solref rescaled to keep k0; connect anchors re-rounded to float32 kinematics.
 The C comparison uses the same model. Modal targets are not offered.
 
 Sampling: after each step a kernel stores the sample at the step's start (kinematics, constraint
 force and energy that `mjw.step` computed for it) and the new qpos/qvel, so no extra forward pass
 runs (RK4: an extra `mjw.forward` after the step, whose state is sampled, since RK4's last
-evaluation is its fourth stage). The series ends by the base's window rule. Kinetic energy uses the mean of the velocities around a sample with the mass matrix of the
-initial configuration (Euler/implicitfast store half-step velocities; the chain moves by micrometres,
-so M(q) is constant to ~1e-7); RK4 uses the engine's own energy.
+evaluation is its fourth stage). The series ends by the base's window rule. Kinetic energy uses the velocities around a sample with the mass matrix of the
+initial configuration: Euler/implicitfast get 1/2 v_before' M v_after + V, the quantity semi-implicit Euler
+conserves (as the MuJoCo adapter; the chain moves by micrometres, so M(q) is constant to ~1e-7); RK4 uses the
+engine's own energy.
 
 "C vs Warp": unless option `compare_c` is false, the identical MuJoCo model also runs in MuJoCo C
 (float64) with the same settings, and `diagnostics["vs_mujoco_c"]` holds the signed relative
@@ -38,6 +40,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, fields, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -46,12 +49,17 @@ from impactval.engines.mujoco_ import INTEGRATORS, MujocoAdapter, MujocoOptions,
 from impactval.engines.options import boolean, one_of, option
 from impactval.errors import EngineError
 
-#: most chain segments the automatic sizing may choose. MuJoCo's sizing asks for more (93 on the
-#: worked beam), but the chain's joint-space mass matrix has cond(M) = 4.7e7 at N = 81 (1.3e7 at 51,
-#: 7.9e6 at 41), so mujoco_warp's float32 factorisation returns M^-1 f with 57 % error at N = 81 (1 %
-#: at 41) and the first loaded step is NaN at any dt; N = 53-61 grow energy at dt = 1e-6; N = 51 runs
-#: and matches MuJoCo C within 0.1 %. A larger settings.segments is built as asked (and may fail).
-MAX_SEGMENTS = 51
+#: most chain segments the automatic sizing may choose, per rotary inertia (measured, docs/mujoco-warp.md).
+#: The chain is rooted at its middle segment (option chain_root), which halves the tree depth and cuts
+#: float32's error in M^-1 f by 6-10x (N = 93: 7 % -> 1 %); then the "section" chain (rotary inertia
+#: m (l^2 + h^2)/12) runs and matches MuJoCo C within 0.04 % up to N = 121 and grows energy at 161; the
+#: "none" chain (m l^2/12, worse conditioned) runs to N = 81 (NaN at 93) with solver-iteration overflows
+#: and float32 differences to C up to 0.7 % from N ~ 76. A larger settings.segments is built as asked.
+MAX_SEGMENTS = {"section": 121, "none": 81}
+#: largest diagonally scaled condition number of the chain's mass matrix the sizing accepts for float32
+#: (measured, scaled cond of M(q0) -> outcome in float32: <= 1.8e7 every chain ran and matched MuJoCo C within
+#: 0.04 %; 2.8e7 ("none", heavy_wc_slender N = 76) 0.7 % off C; >= 5.6e7 NaN or energy growth)
+COND_LIMIT = 2e7
 #: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
 CHUNK = 64
 #: largest number of contacts / constraint rows the Warp data holds (one contact pair, supports)
@@ -66,6 +74,9 @@ class MujocoWarpOptions(MujocoOptions):
                                  "better-conditioned chain float32 can solve), 'none' = m l^2/12 (MuJoCo's default; "
                                  "in float32 +1.7 % f_m vs C and 3.5 % energy error at N = 51)",
                                  one_of("none", "section"))
+    chain_root: str = option("middle", "segment the chain's kinematic tree starts from: 'middle' (default here: two "
+                             "branches of ~N/2, supports as constraints), 'hit', or 'end' (MuJoCo's serial chain; in "
+                             "float32 N <= 51 only)", one_of("end", "hit", "middle"))
     compare_c: bool = option(True, "also run the identical model in MuJoCo C and report diagnostics['vs_mujoco_c'] "
                              "(default true)", boolean)
     graph_capture: bool = option(True, "replay one captured step as a Warp CPU graph (default true; false = plain "
@@ -91,14 +102,14 @@ class MujocoWarpAdapter(EngineAdapter):
     # ------------------------------------------------------------------ the identical model in C
     def c_settings(self, scene, settings: EngineSettings) -> EngineSettings:
         """The settings MuJoCo C gets for the identical model: the MuJoCo options only, the chain's
-        segment count fixed (capped at MAX_SEGMENTS when sized automatically)."""
+        segment count fixed (see `segments`)."""
         opts = settings.options
         if isinstance(opts, tuple):
             opts = self.parse(settings).options
         c_opts = MujocoOptions(**{f.name: getattr(opts, f.name) for f in fields(MujocoOptions)})
         segments = settings.segments
         if segments is None and scene.target.kind == "beam":
-            segments = min(default_segments(scene, replace(settings, options=c_opts)), MAX_SEGMENTS)
+            segments = sized_segments(scene, c_opts.chain_tol, c_opts.rotary_inertia, c_opts.chain_root)
         return replace(settings, options=c_opts, segments=segments)
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
@@ -131,6 +142,9 @@ class MujocoWarpAdapter(EngineAdapter):
         mjm, mjd, lay, probe, info = run.model, run.data, run.lay, run.probe, dict(run.diagnostics)
         mujoco.mj_forward(mjm, mjd)
         m = mjw.put_model(mjm)
+        # the constraint solver's iteration overflows are reported in the row (diagnostics), not printed
+        quiet = int(mjw.OverflowType.ITERATIONS) | int(mjw.OverflowType.LS_ITERATIONS)
+        m.opt.warn_overflow = int(m.opt.warn_overflow) & ~quiet
         d = mjw.put_data(mjm, mjd, nconmax=NCONMAX, njmax=NJMAX)
         if mjm.neq:
             info["pin_anchor_shift"] = _reanchor_connects(wp, mjw, mujoco, mjm, m, d)
@@ -201,8 +215,25 @@ class MujocoWarpAdapter(EngineAdapter):
         diagnostics["compile_s"] = stepper.compile_s
         diagnostics["graph_capture"] = stepper.graph is not None
         diagnostics["float"] = "float32"
+        overflow = int(d.overflow.numpy()[0])
+        notes = []
+        if overflow & quiet:
+            names = [t.name for t in (mjw.OverflowType.ITERATIONS, mjw.OverflowType.LS_ITERATIONS) if overflow & int(t)]
+            diagnostics["solver_overflow"] = names
+            notes.append(f"mujoco_warp's constraint solver hit its iteration limit ({', '.join(names)}) in float32: "
+                         f"compare with the C run (vs_mujoco_c)")
         if lay.kind == "beam":
             diagnostics["segments"] = lay.n_segments
+            diagnostics["chain_root"] = settings.option("chain_root", "middle")
+            diagnostics["mass_condition"] = mass_condition(scene, lay.n_segments, settings.options.rotary_inertia,
+                                                           settings.options.chain_root)
+            if settings.segments is None:
+                c_n = default_segments(scene, EngineSettings(options=(("chain_tol", settings.options.chain_tol),)))
+                if c_n > lay.n_segments:
+                    notes.append(f"chain capped at {lay.n_segments} segments for float32 (MAX_SEGMENTS, COND_LIMIT; "
+                                 f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}")
+        if notes:
+            diagnostics["validity"] = "; ".join(notes)
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
                          energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
@@ -237,8 +268,10 @@ class MujocoWarpAdapter(EngineAdapter):
                 unit[i] = 1.0
                 mujoco.mj_mulM(mjm, d0, col, unit)
                 mass[:, i] = col
-            v_mean = 0.5 * (qvel[:n_rec] + qvel[1:n_rec + 1])
-            ke = 0.5 * np.einsum("ki,ij,kj->k", v_mean, mass, v_mean)
+            # sample k = the state at step k's start; qvel[k] the velocity before that step, qvel[k+1] after it:
+            # 1/2 v_k' M v_(k+1) + V(q_k) is what semi-implicit Euler conserves on a linear system (as MuJoCo C's
+            # adapter measures it); the mean velocity adds a ripple of (omega dt)^2/4 of the energy
+            ke = 0.5 * np.einsum("ki,ij,kj->k", qvel[:n_rec], mass, qvel[1:n_rec + 1])
         return s[:, 3] + contact_pe + ke
 
     def _vs_c(self, scene, c_settings: EngineSettings, sim: Simulation) -> dict:
@@ -307,6 +340,52 @@ def _contact_diag_approx(mujoco, model) -> float:
     if rows.size != 1:
         raise EngineError(f"mujoco-warp: expected one contact row at first touch, found {rows.size}.")
     return float(d.efc_diagA[rows[0]])
+
+
+@lru_cache(maxsize=32)
+def sized_segments(scene, chain_tol: float, rotary: str, root: str = "middle") -> int:
+    """Segments of the Warp chain: the MuJoCo C chain's (its sizing, `engines.mujoco_.default_segments`, with
+    the C default rotary inertia "none", at `chain_tol`), capped at MAX_SEGMENTS[rotary], then lowered in ~10 %
+    steps while the chain's joint-space mass matrix is beyond what float32 factorises (`mass_condition` above
+    COND_LIMIT); when capped, the N within 12 below the cap with the smallest model error, the shared sizing's
+    rule at its cap (engines.chain.segments_for). (Sizing the "section" chain itself would not
+    converge: its rotary inertia keeps its frequencies off the Euler-Bernoulli ones, so it runs to any cap.)"""
+    from impactval.engines.chain import MIN_SEGMENTS, centred
+
+    from impactval.engines.chain import hencky_chain, model_error
+
+    c_n = n = default_segments(scene, EngineSettings(options=(("chain_tol", chain_tol), ("rotary_inertia", "none"))))
+    cap = MAX_SEGMENTS[rotary]
+    while n > MIN_SEGMENTS:
+        if n > cap:
+            n = centred(scene.target.impact_at, cap - max(2, cap // 10), cap, cap)
+        if mass_condition(scene, n, rotary, root) <= COND_LIMIT:
+            break
+        cap = max(MIN_SEGMENTS, int(0.9 * n))
+    if n < c_n:     # capped: as the shared sizing at its cap, the N near the cap with the smallest model error
+        n = min(range(max(MIN_SEGMENTS, n - 12), n + 1),
+                key=lambda m: (model_error(scene, hencky_chain(scene.target, m, rotary)).largest, -m))
+    return n
+
+
+@lru_cache(maxsize=64)
+def mass_condition(scene, n: int, rotary: str, root: str) -> float:
+    """Condition number of the chain model's joint-space mass matrix M(q0), diagonally scaled (the part a
+    Cholesky factorisation feels), from MuJoCo C in float64."""
+    import mujoco
+
+    from impactval.engines.chain import hencky_chain
+    from impactval.engines.mujoco_ import build_xml
+
+    xml, _ = build_xml(scene, EngineSettings(dt=1e-6, options=(("chain_root", root),)),
+                       hencky_chain(scene.target, n, rotary))
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    scale = 1.0 / np.sqrt(np.diag(mass))
+    return float(np.linalg.cond(mass * scale[:, None] * scale[None, :]))
 
 
 def _check_target(scene) -> None:

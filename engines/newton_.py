@@ -108,8 +108,8 @@ class NewtonAdapter(EngineAdapter):
         return (settings.integrator or INTEGRATORS[0]) != "xpbd"
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
-        """Stability limit 2/omega_max of chain + ball + contact spring; SemiImplicit adds its penalty
-        attachments (a segment between two springs attach_ke: omega = 2 sqrt(attach_ke/m))."""
+        """Stability limit 2/omega_max of chain + ball + contact spring; for SemiImplicit, of the chain as it
+        integrates it: free planar segments held by the penalty attachments (`penalty_chain_omega_max`)."""
         from impactval.engines.chain import model_error
         from impactval.reference.hertz import ContactLaw
 
@@ -127,9 +127,12 @@ class NewtonAdapter(EngineAdapter):
             diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m,
                         model_error_delta_m=me.delta_m, rotary_inertia=chain.rotary)
             if integ == "semi-implicit":
-                om_attach = 2.0 * math.sqrt(float(settings.option("attach_ke", ATTACH_KE)) / chain.segment_mass)
-                if om_attach > om:
-                    om, what = om_attach, "SemiImplicit penalty joints (2 sqrt(attach_ke/m_segment))"
+                law_k = law.stiffness(_plate_delta_m(scene))
+                om_pen = penalty_chain_omega_max(chain, float(settings.option("attach_ke", ATTACH_KE)),
+                                                 scene.ball.mass, law_k)
+                if om_pen > om:
+                    om, what = om_pen, (f"SemiImplicit penalty-joint chain N = {chain.n} (attach_ke in x and z at "
+                                        f"each joint) + ball + contact spring {law_k:.3g} N/m")
         if integ == "xpbd":
             return Plan(math.inf, "XPBD (positional, no explicit limit)", err, diag)
         return Plan(2.0 / om, f"{integ}, {what}", err, diag)
@@ -296,7 +299,8 @@ class NewtonAdapter(EngineAdapter):
         if end is not None:
             n_rec = min(n_rec, end)                  # the window rule: samples 0..end
         delta, f, xs, xb, vb = self._series(states.numpy()[:n_rec + 1], first, lay, scene, nb)
-        energy = self._energy(states.numpy()[:n_rec + 1], first, lay, scene, model, nb, delta)
+        # one state past the last sample (when stepped) gives the last sample's velocity after its step
+        energy = self._energy(states.numpy()[:min(n_rec + 2, n_stepped + 1)], first, lay, scene, model, nb, delta)
         if hertz:
             f = scene.alpha * np.maximum(delta, 0.0) ** 1.5
             energy += 0.4 * scene.alpha * np.maximum(delta, 0.0) ** 2.5 - 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
@@ -335,24 +339,27 @@ class NewtonAdapter(EngineAdapter):
 
     @staticmethod
     def _energy(st, first, lay, scene, model, nb, delta) -> np.ndarray:
-        """Kinetic (mean of the velocities around a sample: SemiImplicit moves with the new velocity)
-        + hinge springs + contact spring [J]."""
+        """Energy [J] per sample k (len(delta) samples; `st` may hold one state more): kinetic
+        1/2 v_k' M v_(k+1) with the twists before (v_k) and after (v_(k+1)) step k, the quantity semi-implicit
+        Euler conserves on a linear system (as the MuJoCo adapters measure it; the last sample without a next
+        state uses its own twist) + hinge springs + contact spring + the penalty joints' stretch."""
         st = st.astype(float)
         st[0] = first
+        n_s = len(delta)
         qd = st[:, 7 * nb:].reshape(len(st), nb, 6)
-        q = st[:, :7 * nb].reshape(len(st), nb, 7)
+        q = st[:n_s, :7 * nb].reshape(n_s, nb, 7)
         mass = model.body_mass.numpy().astype(float)
         inertia = model.body_inertia.numpy().astype(float)
-        v = qd.copy()
-        v[:-1] = 0.5 * (qd[:-1] + qd[1:])
-        ke = 0.5 * np.einsum("b,kbi,kbi->k", mass, v[..., :3], v[..., :3])
-        ke += 0.5 * np.einsum("kbi,bij,kbj->k", v[..., 3:], inertia, v[..., 3:])   # planar: I ~ world frame
+        before = qd[:n_s]
+        after = np.concatenate([qd[1:n_s + 1], qd[len(qd) - 1:][:max(0, n_s + 1 - len(qd))]])
+        ke = 0.5 * np.einsum("b,kbi,kbi->k", mass, before[..., :3], after[..., :3])
+        ke += 0.5 * np.einsum("kbi,bij,kbj->k", before[..., 3:], inertia, after[..., 3:])   # planar: I ~ world frame
         pe = 0.5 * lay["contact_stiffness"] * np.maximum(delta, 0.0) ** 2
         if lay["segments"]:
             n = lay["segments"]
             chain = q[:, :n]                  # the segments are bodies 0..n-1
             theta = 2.0 * np.arctan2(chain[..., 4], chain[..., 6])     # rotation about y
-            rel = np.diff(np.concatenate([np.zeros((len(st), 1)), theta], axis=1), axis=1)
+            rel = np.diff(np.concatenate([np.zeros((n_s, 1)), theta], axis=1), axis=1)
             k = np.asarray(lay["hinge_stiffness"])
             pe += 0.5 * rel**2 @ k[:n]
             if len(k) > n:
@@ -360,6 +367,67 @@ class NewtonAdapter(EngineAdapter):
             if lay.get("attach_ke"):
                 pe += 0.5 * lay["attach_ke"] * _joint_gaps_squared(chain, lay)
         return pe + ke
+
+
+def _plate_delta_m(scene) -> float:
+    from impactval.reference.hertz import plate_impact
+
+    return plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).delta_m
+
+
+def penalty_chain_omega_max(chain: HenckyChain, attach_ke: float, ball_mass: float, contact_k: float) -> float:
+    """Highest frequency [rad/s] of the chain SemiImplicit integrates, linearised in the plane: each segment
+    a free body (x, z of its centre of mass, rotation theta; mass m, rotary inertia J), every joint's anchors
+    held together by attach_ke in x and z (a world joint: the anchor to its world point), the hinge springs
+    on the relative rotations, the ball on the contact spring at the hit point. (The segment-on-two-springs
+    estimate 2 sqrt(attach_ke/m) misses the rotation: the anchors' z coupling with lever l/2 on J gives
+    omega^2 ~ 12 attach_ke l^2 / (m (l^2 + h^2)), 1.2-1.4x higher on the worked beam, where it blew up.)"""
+    from scipy import linalg
+
+    n, l = chain.n, chain.segment_length
+    nd = 3 * n + 1                                     # per segment x, z, theta; then the ball's z
+    mass = np.zeros(nd)
+    mass[0:3 * n:3] = mass[1:3 * n:3] = chain.segment_mass
+    mass[2:3 * n:3] = chain.rotary_inertia
+    mass[-1] = ball_mass
+    k = np.zeros((nd, nd))
+
+    def anchor_rows(i: int, end: int) -> tuple[np.ndarray, np.ndarray]:
+        """x and z rows of segment i's anchor at its left (end = -1) or right (+1) end, linearised."""
+        rx, rz = np.zeros(nd), np.zeros(nd)
+        rx[3 * i] = 1.0
+        rz[3 * i + 1] = 1.0
+        rz[3 * i + 2] = -end * l / 2.0                 # rotation theta about y moves (end*l/2, 0) by -theta*end*l/2 in z
+        return rx, rz
+
+    def spring(row: np.ndarray, stiffness: float) -> None:
+        k[:] += stiffness * np.outer(row, row)
+
+    for i in range(n - 1):                             # joint i+1: right end of i to left end of i+1
+        (ax, az), (bx, bz) = anchor_rows(i, 1), anchor_rows(i + 1, -1)
+        spring(bx - ax, attach_ke)
+        spring(bz - az, attach_ke)
+        rot = np.zeros(nd)
+        rot[3 * (i + 1) + 2], rot[3 * i + 2] = 1.0, -1.0
+        spring(rot, chain.hinge_stiffness)
+    ends = [(0, -1, 0.0 if chain.support == "simply-supported" else chain.clamp_stiffness)]
+    if chain.support in ("simply-supported", "clamped-clamped"):
+        ends.append((n - 1, 1, 0.0 if chain.support == "simply-supported" else chain.clamp_stiffness))
+    for i, end, k_rot in ends:                         # world joints
+        ax, az = anchor_rows(i, end)
+        spring(ax, attach_ke)
+        spring(az, attach_ke)
+        rot = np.zeros(nd)
+        rot[3 * i + 2] = 1.0
+        spring(rot, k_rot)
+    hit = np.zeros(nd)                                 # contact: ball z minus the hit point's z
+    hit[3 * chain.hit_segment + 1] = 1.0
+    hit[3 * chain.hit_segment + 2] = -(chain.hit_offset - l / 2.0)
+    hit[-1] = -1.0
+    spring(hit, contact_k)
+    scale = 1.0 / np.sqrt(mass)
+    w2 = linalg.eigvalsh(k * scale[:, None] * scale[None, :])
+    return float(math.sqrt(max(float(w2[-1]), 0.0)))
 
 
 def _joint_gaps_squared(chain: np.ndarray, lay: dict) -> np.ndarray:

@@ -158,4 +158,4 @@ def test_cli_bad_dt_list_is_one_line(tmp_path):
     import sys
     out = subprocess.run([sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--dt", "1e-6,abc",
                           "--out", str(tmp_path)], capture_output=True, text=True)
-    assert out.returncode == 2 and "--dt takes time steps" in out.stderr and "Traceback" not in out.stderr
+    assert out.returncode == 2 and "--dt" in out.stderr and "'abc' is not a number" in out.stderr and len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
