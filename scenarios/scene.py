@@ -41,7 +41,6 @@ TOML format (public, names fixed)::
 from __future__ import annotations
 
 import dataclasses
-
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -406,7 +405,13 @@ _CHECKED: dict = {}
 def _all_frozen(scene) -> bool:
     """True for a Scene whose ball, target and materials are frozen dataclasses (nothing in it can change)."""
     parts = (scene, scene.ball, scene.target, scene.ball.material, scene.target.material)
-    return all(dataclasses.is_dataclass(p) and type(p).__dataclass_params__.frozen for p in parts)
+    if not all(dataclasses.is_dataclass(p) and type(p).__dataclass_params__.frozen for p in parts):
+        return False
+    try:
+        hash(scene)             # a list inside (e.g. a modal target's omega) could still change
+    except TypeError:
+        return False
+    return True
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
@@ -418,7 +423,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
         if _CHECKED.get(id(name_or_path)) is not name_or_path:
             limits.check_scene_fields(name_or_path)
             if _all_frozen(name_or_path):       # immutable all the way down: checked once (repeated solves)
-                _CHECKED.clear() if len(_CHECKED) > 256 else None
+                if len(_CHECKED) > 256:
+                    _CHECKED.clear()
                 _CHECKED[id(name_or_path)] = name_or_path
         return name_or_path
     if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
