@@ -302,11 +302,16 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
 
 
 #: with the residual static flexibility of the dropped modes, the truncation error of an n-mode model falls per
-#: doubling of n at least by this ratio (measured: Euler-Bernoulli beams 40-320x once converging (the cantilever
-#: 281/323/66/92x from 32 modes on), Kirchhoff plates 4.6-9.5x (plate_ss_rectangular, 128 .. 2048 modes),
-#: Timoshenko beams 2.9-17x (the shear part: beam_ss_stubby_timoshenko)); without it 2x is assumed
-TRUNCATION_RATIO = {"euler-bernoulli": 8.0, "plate": 4.0, "timoshenko": 2.0}
-TRUNCATION_RATIO_PLAIN = 2.0
+#: doubling of n by a ratio that is trusted only to 1/TRUNCATION_SAFETY of the ratio observed over the last three
+#: counts, at most (theory: (cap, cap below TRUNCATION_FEW[theory] modes)) and at least 1.5. Measured per doubling:
+#: Euler-Bernoulli beams 18-323x from 16 modes on (the cantilever 281/323/66/92x from 32 modes, a stubby L/h = 4
+#: beam 82/41/236x, a random simply supported beam 1700x then 18x from 24 to 48 modes), irregular below (a random
+#: clamped beam 262x then 7.4x from 4 to 8 modes); Kirchhoff plates 4.6-9.5x from 128-256 modes on, irregular
+#: below (0.6x, 2.3x, 1.65x); Timoshenko beams 2.9-17x (the shear part: beam_ss_stubby_timoshenko); without the
+#: residual at most 2x is assumed. With two counts only, 1.5.
+TRUNCATION_CAP = {"euler-bernoulli": (16.0, 8.0), "plate": (4.0, 2.0), "timoshenko": (2.0, 2.0)}
+TRUNCATION_FEW = {"euler-bernoulli": 16, "plate": 256, "timoshenko": 0}
+TRUNCATION_PLAIN, TRUNCATION_SAFETY, TRUNCATION_FLOOR = 2.0, 1.5, 1.5
 #: share of tol given to each mode-count run's time step
 STEP_SHARE = 1.0 / 3.0
 
@@ -318,14 +323,14 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
     Truncation: with the error falling per doubling by a ratio r, e_2n = e_n / r, so e_2n <= |T_n - T_2n| / (r - 1)
     for the exact-step values T; the computed difference hides at most both runs' time-step uncertainties:
     e_2n <= (|X_n - X_2n| + u_n + u_2n) / (r - 1). r is the ratio observed over the last three counts
-    (|X_n/2 - X_n| / |X_n - X_2n|), at most TRUNCATION_RATIO of the structure theory and at least 2; with two counts
-    only, r = 2. The largest relative value over t_m, f_m, delta_m is used for all three (one metric's difference
+    (|X_n/2 - X_n| / |X_n - X_2n|) divided by TRUNCATION_SAFETY, at most TRUNCATION_CAP of the structure theory
+    and at least TRUNCATION_FLOOR (also with two counts only). The largest relative value over t_m, f_m, delta_m is used for all three (one metric's difference
     may vanish by accident)."""
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     target = scene.target
     kind = "plate" if target.kind == "plate" else getattr(target, "theory", "euler-bernoulli")
-    r_max = TRUNCATION_RATIO.get(kind, 2.0) if residual else TRUNCATION_RATIO_PLAIN
+    caps = TRUNCATION_CAP.get(kind, (2.0, 2.0)) if residual else (TRUNCATION_PLAIN, TRUNCATION_PLAIN)
     n = max(2, initial_mode_count(scene) // 2)      # a cheap half count first: its ratio lets the next pair stop
     prev, d_prev = None, None
     while True:
@@ -335,7 +340,10 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
             p_run, p_unc = prev
             a, b = p_run.metrics, run.metrics
             d_now = max(abs(a.t_m - b.t_m) / b.t_m, abs(a.f_m - b.f_m) / b.f_m, abs(a.delta_m - b.delta_m) / b.delta_m)
-            r = 2.0 if d_prev is None else max(2.0, min(r_max, d_prev / d_now if d_now > 0.0 else r_max))
+            cap = caps[0] if n // 2 >= TRUNCATION_FEW.get(kind, 0) else caps[1]
+            r = TRUNCATION_FLOOR
+            if d_prev is not None:
+                r = max(TRUNCATION_FLOOR, min(cap, d_prev / d_now / TRUNCATION_SAFETY if d_now > 0.0 else cap))
             rel = (d_now + _rel(p_unc, b) + _rel(unc, b)) / (r - 1.0)
             trunc = Metrics(rel * b.t_m, rel * b.f_m, rel * b.delta_m)
             if rel + _rel(unc, b) <= tol or n >= 20000:
