@@ -324,8 +324,8 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
     for the exact-step values T; the computed difference hides at most both runs' time-step uncertainties:
     e_2n <= (|X_n - X_2n| + u_n + u_2n) / (r - 1). r is the ratio observed over the last three counts
     (|X_n/2 - X_n| / |X_n - X_2n|) divided by TRUNCATION_SAFETY, at most TRUNCATION_CAP of the structure theory
-    and at least TRUNCATION_FLOOR (also with two counts only). The largest relative value over t_m, f_m, delta_m is used for all three (one metric's difference
-    may vanish by accident)."""
+    and at least TRUNCATION_FLOOR (also with two counts only). The largest relative value over t_m, f_m, delta_m
+    is used for all three (one metric's difference may vanish by accident)."""
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
     target = scene.target

@@ -54,7 +54,8 @@ def random_scene(rng, kinds=("beam", "beam", "plate", "modal", "rigid-plate"), t
                   "impact_at": [float(rng.uniform(0.05, 0.95)), float(rng.uniform(0.05, 0.95))]}
         n, residual = int(rng.choice([8, 24, 120])), bool(rng.random() < 0.4)
     elif kind == "modal":
-        scene = scene_from_dict({"name": "random", "ball": ball, "target": {"kind": "rigid-plate", "material": "steel"}})
+        scene = scene_from_dict({"name": "random", "ball": ball,
+                                 "target": {"kind": "rigid-plate", "material": "steel"}})
         p = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
         count = int(rng.integers(1, 8))
         w = np.array([_log_uniform(rng, 0.3, 1000.0) for _ in range(count)])    # omega delta_m / v0
@@ -136,8 +137,12 @@ def _truth_auto(scene, modes_used: int):
     """The scene with 8x the modes (32x for Timoshenko: its truncation error falls only ~2.5x per doubling) and
     their residual flexibility, tol 1e-11: independent of the mode-count estimate under test."""
     mult = 32 if getattr(scene.target, "theory", "") == "timoshenko" else 8
-    md = structure_modes(scene, mult * modes_used, residual=True)
-    return solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-11)[0].metrics
+    try:
+        md = structure_modes(scene, mult * modes_used, residual=True)
+        return solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-11)[0].metrics
+    except impactval.ImpactvalError:    # over the node budget (a heavy ball): 8x the modes (Timoshenko: e/24 at worst)
+        md = structure_modes(scene, 8 * modes_used, residual=True)
+        return solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-10)[0].metrics
 
 
 @pytest.mark.slow
@@ -176,13 +181,17 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 #: cases) dominates, and the stubby Timoshenko beam, whose truncation ratio is trusted to 2x per doubling only.
 #: Asserted honest and not looser than this.
 TEN_X_MISSES = {"beam_cantilever_tip": 20, "beam_ss_stubby_timoshenko": 110, "heavy_ball_slender_beam": 60,
-                "cantilever_titanium": 26, "cc_aluminium_0p3": 24, "heavy_wc_slender": 26, "stubby_steel": 21}
+                "cantilever_titanium": 26, "cc_aluminium_0p3": 24, "heavy_wc_slender": 26, "stubby_steel": 21,
+                "rand_wc_on_steel_cantilever": 50, "stubby_steel_timoshenko": 18, "heavy_wc_slender_timoshenko": 260}
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]
 
 
-@pytest.mark.parametrize("name", [pytest.param(s, marks=pytest.mark.slow) if s == "plate_ss_rectangular" else s
+_SLOW_TRUTH = ("plate_ss_rectangular", "heavy_wc_slender_timoshenko")      # truth with thousands of modes: 3-46 s
+
+
+@pytest.mark.parametrize("name", [pytest.param(s, marks=pytest.mark.slow) if s.endswith(_SLOW_TRUTH) else s
                                   for s in _SCENES], ids=lambda s: s.rsplit("/", 1)[-1].removesuffix(".toml"))
 def test_catalogue_uncertainty_is_within_10x_of_the_real_error(name):
     scene = impactval.load_scene(name)
