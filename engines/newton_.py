@@ -9,8 +9,11 @@ Model (SI, z up, no gravity, no friction, no damping: `angular_damping = 0`, con
 - rigid plate: Newton's ground plane;
 - beam: the shared Hencky chain (`engines.chain.hencky_chain`: N rigid segments, mass rho*A*l, rotary
   inertia m(l^2 + h^2)/12 by default (option rotary_inertia), revolute joints about y with passive
-  stiffness EI/l, 2EI/l at a clamp), a box shape on the hit segment only. N from the shared sizing
-  capped at MAX_SEGMENTS = 41 (SemiImplicit's penalty joints soften finer chains). Supports: simply
+  stiffness EI/l, 2EI/l at a clamp), a box shape on the hit segment only, the origin at the beam's middle
+  (float32 positions |x| <= L/2). SemiImplicit: attach_ke at the float32 cap (`attach_ke_for`) and N from the
+  shared sizing lowered until the penalty joints' give is within GIVE_TOL (`penalty_segments`); model_error =
+  the rigid chain's composed with that give (`penalty_give`). Other integrators: the shared sizing capped at
+  MAX_SEGMENTS = 41. Supports: simply
   supported = revolute joints to the world at x = 0 and x = L (the second closes a loop:
   SemiImplicit's penalty joints give the axial freedom a roller would); clamped ends add 2EI/l;
   cantilever = free end. Out-of-plane inertias are the box's (never excited: the problem is planar).
@@ -22,7 +25,7 @@ linear k0); the force series is ke*max(delta, 0) from the kinematics after each 
 "hertz": no shapes; a Warp kernel adds alpha*max(delta,0)^1.5 to `body_f` from the current poses.
 
 Integrators (`--integrator`): "semi-implicit" (default; SolverSemiImplicit, explicit penalty joints
-with joint_attach_ke = ATTACH_KE, attach kd = 0), "featherstone" (reduced coordinates; no loop
+with joint_attach_ke = the option or attach_ke_for(scene), attach kd = 0), "featherstone" (reduced coordinates; no loop
 closures, so only the plate and the cantilever), "xpbd" (SolverXPBD: positional contacts that ignore
 ke: a result, see docs/newton.md). Build time (Newton's finalize + the first captured step, which
 compiles or loads kernels: `diagnostics["compile_s"]`) and stepping time are reported apart.
