@@ -1,4 +1,4 @@
-"""Exudyn adapter: rigid plate and beams as FFRF reduced-order (modal) bodies (issue 6).
+"""Exudyn adapter: rigid plate, ANCF cable beams and FFRF reduced-order (modal) bodies (issues 6, 11).
 
 Scene in Exudyn (y up, SI units): the ball is a `NodePoint` + `MassPoint` starting at first touch
 with velocity -v0 in y. The target is
@@ -7,20 +7,27 @@ with velocity -v0 in y. The target is
 - a modal target (kind "modal"): an FFRF body with the given omega, modal masses and phi;
 - a second ball (kind "ball"): another `NodePoint` + `MassPoint` (centre at y = -R2, moving at +v2); the
   contact (native `ObjectContactSphereSphere` or the injected spring-damper) joins the two centres;
-- a beam: an `ObjectFFRFreducedOrder` body whose floating frame is fixed to the ground by six
-  `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the impact
-  section's centroid (contact radius h/2, so the ball touches the top face). Two beam models,
-  option ("beam_model", ...):
-  * "fem" (default): modes of a solid finite-element model (triquadratic hexahedra assembled by
-    scikit-fem, supports as constrained DOFs, see `exudyn_fem`) handed to `exudyn.FEM.FEMinterface`;
-    the FE frequencies are reported next to the continuum's (diagnostics);
+- a beam, option ("beam_model", ...), default chosen from the scene's beam theory:
+  * "fe-beam" (default for theory = "euler-bernoulli"): an Euler-Bernoulli finite-element beam, a mesh of
+    Exudyn's `ObjectANCFCable2D` elements (planar Bernoulli-Euler ANCF cable, cubic Hermite, consistent
+    mass rho A) with the supports as `CoordinateConstraint`s; the contact is a `MarkerNodePosition` at the
+    impact node on the axis (contact radius h/2: the ball touches the top face). The element count is
+    sized from the scene (`exudyn_beam.elements_for`: the modes that matter within 0.5 * mode_tol in
+    frequency, then the mesh's model error within that too; option "beam_elements" fixes it);
+    implicit solvers use a sparse linear solver and Newton relTol 1e-6 (see _solver_settings);
+  * "solid" (default for theory = "timoshenko"; "fem" is its old name): an `ObjectFFRFreducedOrder`
+    body with the modes of a solid finite-element model (triquadratic hexahedra assembled by scikit-fem,
+    supports as constrained DOFs, see `exudyn_fem`) handed to `exudyn.FEM.FEMinterface`; its frame is
+    fixed by six `CoordinateConstraint`s; the contact point is a `MarkerSuperElementPosition` at the
+    impact section's centroid. 3-D elasticity is shear-deformable, like Timoshenko's beam;
   * "reference-modes": the reference's own modes (`reference.beams.beam_modes`: the same omega,
     modal masses and shape values at the contact) on a hand-made FEMinterface (nodes along the axis,
     lumped mass, `modeBasis` = the shapes; reduced mass and stiffness matrices set to the
     reference's diag(m_n) and diag(m_n omega_n^2)), so the difference to the reference with the same
-    modes is time integration alone.
-  `settings.modes` = number of beam modes (vertical bending modes for "fem"); default
-  `default_modes(scene)`.
+    modes is time integration alone (Timoshenko modes: one contact node carries phi).
+  `settings.modes` = number of beam modes for "solid" and "reference-modes" (default
+  `default_modes(scene)`); for "fe-beam" the number of modes the mesh must reproduce (default
+  required_modes(scene, mode_tol).count).
 
 Contact (`settings.contact`):
 - "native": Exudyn's own `ObjectContactSphereSphere` (active-set contact, impactModel 0, no damping)
@@ -40,10 +47,13 @@ Integrators (`settings.integrator`): "generalized-alpha" (default; spectral radi
 (Exudyn's TrapezoidalIndex2), "explicit-euler", "rk44", "rk67", and the automatic-step ones
 "dopri5" and "ode23" (settings.dt is the largest step; options "rtol" (default 1e-8) and "atol"
 (default rtol * 1e-3 * the plate's delta_m); tighter than rtol 1e-13 / atol 1e-18 is refused: the
-error test cannot be met in double precision and DOPRI5 never finishes). A solver that stops
+error test cannot be met in double precision and DOPRI5 never finishes; on the fe-beam mesh they are refused:
+DOPRI5 gave no result within 120 s on the worked beam). A solver that stops
 (exu.SolverError or a False return) becomes status "unstable" with Exudyn's message.
 The window starts at 2.5 rigid-plate contact times (+ tail) and is doubled (re-run) until the first
-contact has ended, up to 160 plate times.
+contact has ended, up to 160 plate times. `n_steps` and the stepping time count the steps up to the
+base rule's window (first contact's end + tail); every step Exudyn took, re-runs included, is in the
+diagnostics (`steps_simulated`, `step_s_simulated`).
 
 Settings always set (engines.md): console output off, no solution file, sensors stored internally
 every step, `discontinuous.useRecommendedStepSize = False` (else native contacts can abort with
@@ -73,7 +83,9 @@ IMPLICIT = ("generalized-alpha", "trapezoidal")
 #: fixed-step explicit solvers (a stability limit applies; dopri5/ode23 control their own step)
 EXPLICIT = ("explicit-euler", "rk44", "rk67")
 AUTOMATIC_STEP = ("dopri5", "ode23")
-BEAM_MODELS = ("fem", "reference-modes")
+#: "fe-beam": Euler-Bernoulli ANCF cable mesh (exudyn_beam); "solid": hex27 solid FE modes on an FFRF body
+#: (exudyn_fem; "fem" is its old name, still accepted); "reference-modes": the reference's own modes
+BEAM_MODELS = ("fe-beam", "solid", "fem", "reference-modes")
 LAWS = ("hertz", "linear")
 
 
@@ -81,6 +93,28 @@ def _fe_elements(value):
     from impactval.engines.options import whole_numbers
 
     return whole_numbers(3)(value)
+
+
+def _whole_positive(value):
+    try:
+        n = int(value.strip()) if isinstance(value, str) else int(value)
+        ok = not isinstance(value, bool) and (isinstance(value, str) or n == value) and n >= 2
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"must be a whole number of elements >= 2, got {value!r}")
+    return n
+
+
+def beam_model_of(scene, settings) -> str:
+    """The beam model a run uses: the option, else "fe-beam" for an Euler-Bernoulli scene and "solid" for a
+    Timoshenko one (a solid is shear-deformable and has rotary inertia, like Timoshenko's beam)."""
+    chosen = settings.option("beam_model")
+    if chosen == "fem":
+        return "solid"
+    if chosen:
+        return chosen
+    return "solid" if getattr(scene.target, "theory", "euler-bernoulli") == "timoshenko" else "fe-beam"
 
 
 def _tol_check(low: float):
@@ -93,7 +127,11 @@ def _tol_check(low: float):
 class ExudynOptions:
     """`--option exudyn.KEY=VALUE`."""
 
-    beam_model: str = option("fem", "'fem' (default) or 'reference-modes'", one_of(*BEAM_MODELS))
+    beam_model: str | None = option(None, "'fe-beam' (Euler-Bernoulli ANCF cable mesh; default for theory = "
+                                    "euler-bernoulli), 'solid' (hex27 solid FE modes, alias 'fem'; default for theory = "
+                                    "timoshenko) or 'reference-modes'", one_of(*BEAM_MODELS))
+    beam_elements: int | None = option(None, "elements of the fe-beam mesh (default: sized from the scene, see "
+                                       "docs/exudyn.md)", _whole_positive)
     law: str = option("hertz", "'hertz' (default) or 'linear' (k0 = 0.8 alpha sqrt(delta_m), exponent 1)", one_of(*LAWS))
     user_function: str = option("symbolic", "'symbolic' (default) or 'python' (contact 'hertz' only)",
                                 one_of("symbolic", "python"))
@@ -117,18 +155,25 @@ class ExudynOptions:
 
 #: most beam modes chosen automatically (the cost per step grows ~ n^2, the FE build faster)
 MAX_DEFAULT_MODES = 60
+#: most modes of the reference-modes body chosen automatically: no FE build, ~5 ms/step at 120 modes; the heavy WC
+#: ball on the slender Timoshenko beam needs 120 for 0.5 % (60: +1.09 % in f_m; a plain Timoshenko truncation
+#: converges slowly, 6485 modes for 1 % by required_modes)
+MAX_REFERENCE_MODES = 120
 #: relative truncation error the automatic mode count aims at (first-order estimate, per metric)
 DEFAULT_MODE_TOL = 1e-2
 #: simulated window: starts at this many rigid-plate contact times, doubled until the contact ends
 WINDOW_START, WINDOW_MAX = 2.5, WINDOW_CAP
 FRAME_MASS = 1e12
+#: Newton relative tolerance for the ANCF mesh (see _solver_settings)
+CABLE_NEWTON_RTOL = 1e-6
 
 
-def default_modes(scene, tol: float = DEFAULT_MODE_TOL) -> int:
+def default_modes(scene, tol: float = DEFAULT_MODE_TOL, cap: int = MAX_DEFAULT_MODES) -> int:
     """Beam mode count when settings.modes is None: the scene's own `modes`, else the reference's mode
     criterion for a plain n-mode model (`reference.modechoice.required_modes(scene, tol)
     .count_without_residual`: the dropped modes shift t_m, f_m, delta_m by < 1 %, first order;
-    43 for the worked beam), at least 4 and at most MAX_DEFAULT_MODES.
+    43 for the worked beam), at least 4 and at most `cap` (MAX_DEFAULT_MODES for the solid,
+    MAX_REFERENCE_MODES for the reference-modes body).
     """
     from impactval.reference.modechoice import required_modes
 
@@ -136,7 +181,7 @@ def default_modes(scene, tol: float = DEFAULT_MODE_TOL) -> int:
     if getattr(target, "modes", None):
         return int(target.modes)
     n = required_modes(scene, tol).count_without_residual
-    return int(min(max(n, 4), MAX_DEFAULT_MODES))
+    return int(min(max(n, 4), cap))
 
 
 @dataclass
@@ -199,9 +244,18 @@ class ExudynAdapter(EngineAdapter):
         from impactval.reference.hertz import ContactLaw
 
         structure = self._structure(scene, settings)
+        integ = settings.integrator or self.integrators[0]
+        if isinstance(structure, _Cable) and integ in AUTOMATIC_STEP:
+            raise EngineError(f"exudyn: integrator {integ!r} does not finish on the fe-beam (ANCF) mesh (measured: no "
+                              f"result within 120 s on beam_ss_midspan, 36 elements); use a fixed-step integrator "
+                              f"(generalized-alpha, rk44, ...) or option beam_model=reference-modes or solid.")
         diag: dict = {}
         err = 0.0 if structure is None else math.nan
-        if structure is not None and scene.target.kind == "beam":
+        if isinstance(structure, _Cable):
+            me = structure.model_error
+            err = max(abs(x) for x in me)
+            diag.update(model_error_t_m=me[0], model_error_f_m=me[1], model_error_delta_m=me[2])
+        elif structure is not None and scene.target.kind == "beam":
             me = modal_model_error(scene, structure)
             err = max(abs(x) for x in me)
             diag.update(model_error_t_m=me[0], model_error_f_m=me[1], model_error_delta_m=me[2])
@@ -211,6 +265,10 @@ class ExudynAdapter(EngineAdapter):
         k = law.stiffness(plate_times(scene).delta_m)
         if structure is None:       # a rigid plate, or a second ball (the reduced mass)
             om = math.sqrt(k / contact_mass(scene))
+        elif isinstance(structure, _Cable):     # every bending mode of the mesh + ball + spring, and the axial modes
+            md = structure.mesh.modes()
+            om = max(modal_omega_max(md.omega, md.modal_mass, md.phi, scene.ball.mass, k),
+                     structure.mesh.omega_max())
         else:
             om = modal_omega_max(structure.omega, np.diag(structure.mass_reduced), structure.phi_contact,
                                  scene.ball.mass, k)
@@ -219,9 +277,9 @@ class ExudynAdapter(EngineAdapter):
         return Plan(bound / om, f"{integ}, modal body + ball + contact spring {k:.3g} N/m", err, diag)
 
     # ------------------------------------------------------------------ structure
-    def _structure(self, scene, settings: EngineSettings) -> _Structure | None:
-        key = (scene, settings.modes, settings.option("beam_model", "fem"), settings.option("fe_elements"),
-               settings.option("mode_tol", DEFAULT_MODE_TOL))
+    def _structure(self, scene, settings: EngineSettings) -> _Structure | _Cable | None:
+        key = (scene, settings.modes, settings.option("beam_model"), settings.option("fe_elements"),
+               settings.option("beam_elements"), settings.option("mode_tol", DEFAULT_MODE_TOL))
         memo = getattr(self, "_memo", None)
         if memo is not None and memo[0] == key:
             return memo[1]
@@ -229,7 +287,7 @@ class ExudynAdapter(EngineAdapter):
         self._memo = (key, s)
         return s
 
-    def _make_structure(self, scene, settings: EngineSettings) -> _Structure | None:
+    def _make_structure(self, scene, settings: EngineSettings) -> _Structure | _Cable | None:
         target = scene.target
         if target.kind in ("rigid-plate", "ball"):
             return None         # no modal body (a second ball is a free mass point, see _add_second_ball)
@@ -237,9 +295,14 @@ class ExudynAdapter(EngineAdapter):
             return _modal_target_structure(scene)
         if target.kind != "beam":
             raise EngineError(f"exudyn: target kind {target.kind!r} is not supported (rigid-plate, beam, modal, ball are).")
-        n = settings.modes or default_modes(scene, float(settings.option("mode_tol", DEFAULT_MODE_TOL)))
-        if settings.option("beam_model", "fem") == "reference-modes":
+        mode_tol = float(settings.option("mode_tol", DEFAULT_MODE_TOL))
+        kind = beam_model_of(scene, settings)
+        if kind == "fe-beam":
+            return _cable_structure(scene, mode_tol, settings.modes, settings.option("beam_elements"))
+        if kind == "reference-modes":
+            n = settings.modes or default_modes(scene, mode_tol, MAX_REFERENCE_MODES)
             return _reference_modes_structure(target, n)
+        n = settings.modes or default_modes(scene, mode_tol)
         return _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
 
     def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
@@ -254,8 +317,11 @@ class ExudynAdapter(EngineAdapter):
         plan_s = time.perf_counter() - t0
         plate = plate_times(scene)      # a second ball: the two-ball contact (reduced mass)
         window = WINDOW_START * plate.t_m + settings.tail
+        steps_all, step_s_all = 0, 0.0
         while True:
             sim = self._run_window(scene, settings, structure, plate, window)
+            steps_all += sim.n_steps
+            step_s_all += sim.step_s
             contacts = contacts_from_series(sim.t, sim.delta, sim.f)
             done = bool(contacts) and math.isfinite(contacts[0].t_end) and contacts[0].t_end + settings.tail <= sim.t[-1]
             bad = not (np.all(np.isfinite(sim.delta)) and np.all(np.isfinite(sim.f)))
@@ -264,12 +330,22 @@ class ExudynAdapter(EngineAdapter):
             window *= 2.0
         sim.build_s += plan_s
         sim.diagnostics["window_s"] = window
+        # Exudyn integrates a whole window (re-run with a doubled window until the contact has ended): every step
+        # it took, re-runs included, is in the diagnostics; n_steps and the stepping time count the steps of the
+        # one window rule only (engines.base: the first contact's end plus the tail), the time pro rata of the
+        # last run's (its cost per step is uniform), so steps_per_s compares with the stepping engines'
+        sim.diagnostics["steps_simulated"] = steps_all
+        sim.diagnostics["step_s_simulated"] = step_s_all
         if done:      # the one window rule (engines.base): the first contact's end plus the tail
             keep = int(np.searchsorted(sim.t, contacts[0].t_end + settings.tail - 1e-15)) + 1
             for key in ("t", "delta", "f", "x_ball", "x_structure", "v_ball", "energy"):
                 arr = getattr(sim, key)
                 if len(arr) > keep:
                     setattr(sim, key, arr[:keep])
+            if sim.n_steps > 0:
+                counted = max(len(sim.t) - 1, 0)
+                sim.step_s *= counted / sim.n_steps
+                sim.n_steps = counted
         sim.frequencies = np.zeros(0) if structure is None else np.asarray(structure.omega, float)
         return sim
 
@@ -287,6 +363,7 @@ class ExudynAdapter(EngineAdapter):
         mbs = sc.AddSystem()
         ground = mbs.AddObject(eii.ObjectGround())
         n_ball2 = None
+        cable_nodes: list = []
         if scene.target.kind == "ball":
             m_target, n_ball2, contact_point, target_radius = self._add_second_ball(mbs, eii, scene)
             n_modal = None
@@ -296,6 +373,10 @@ class ExudynAdapter(EngineAdapter):
             target_radius = ball.radius
             contact_point = np.array([0.0, -target_radius, 0.0])
             m_target = mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=ground, localPosition=list(contact_point)))
+            n_modal = None
+        elif isinstance(structure, _Cable):
+            contact_point, target_radius = structure.contact_point, structure.radius
+            m_target, cable_nodes = self._add_cable(mbs, eii, structure)
             n_modal = None
         else:
             contact_point, target_radius = structure.contact_point, structure.radius
@@ -317,13 +398,17 @@ class ExudynAdapter(EngineAdapter):
                                                   outputVariableType=exu.OutputVariableType.Displacement, **storage))
             s_vel2 = mbs.AddSensor(eii.SensorNode(nodeNumber=n_ball2, outputVariableType=exu.OutputVariableType.Velocity,
                                                   **storage))
+        s_cable = [(mbs.AddSensor(eii.SensorNode(nodeNumber=nd, outputVariableType=exu.OutputVariableType.Coordinates,
+                                                 **storage)),
+                    mbs.AddSensor(eii.SensorNode(nodeNumber=nd, outputVariableType=exu.OutputVariableType.Coordinates_t,
+                                                 **storage))) for nd in cable_nodes]
         if n_modal is not None:
             s_q = mbs.AddSensor(eii.SensorNode(nodeNumber=n_modal, outputVariableType=exu.OutputVariableType.Coordinates,
                                                **storage))
             s_qt = mbs.AddSensor(eii.SensorNode(nodeNumber=n_modal,
                                                 outputVariableType=exu.OutputVariableType.Coordinates_t, **storage))
         mbs.Assemble()
-        sim_settings, solver = self._solver_settings(exu, settings, plate, window)
+        sim_settings, solver = self._solver_settings(exu, settings, plate, window, isinstance(structure, _Cable))
         build_s = time.perf_counter() - tb
         ts = time.perf_counter()
         try:
@@ -347,6 +432,14 @@ class ExudynAdapter(EngineAdapter):
         elif structure is None:
             x_structure = np.zeros_like(t)
             energy_structure = np.zeros_like(t)
+        elif isinstance(structure, _Cable):
+            # all mesh coordinates (node-major u, w, u', w'); energy from the mesh's linear matrices (the deflections
+            # are microscopic: the ANCF element's nonlinear terms are ~1e-8 of these)
+            q = np.hstack([mbs.GetSensorStoredData(a)[:, 1:] for a, _ in s_cable])
+            qt = np.hstack([mbs.GetSensorStoredData(b)[:, 1:] for _, b in s_cable])
+            x_structure = -q[:, 4 * structure.mesh.impact_node + 1]
+            energy_structure = 0.5 * (np.sum(qt * (structure.mass @ qt.T).T, axis=1)
+                                      + np.sum(q * (structure.stiffness @ q.T).T, axis=1))
         else:
             q = mbs.GetSensorStoredData(s_q)[:, 1:]
             qt = mbs.GetSensorStoredData(s_qt)[:, 1:]
@@ -368,13 +461,15 @@ class ExudynAdapter(EngineAdapter):
             diag.update(structure.diagnostics)
             model = structure.model
         used = {"integrator": integrator, "law": law}
-        if structure is not None:
+        if isinstance(structure, _Cable):       # "segments": the structure size the run table shows (column N)
+            used["beam_elements"] = used["segments"] = structure.mesh.n_elements
+        elif structure is not None:
             used["modes"] = int(len(structure.omega))
         return Simulation(t=t, delta=delta, f=f, x_ball=x_ball, x_structure=x_structure, v_ball=v_ball, energy=energy,
                           build_s=build_s, step_s=step_s, n_steps=max(len(t) - 1, 0), model=model, diagnostics=diag,
                           settings=used)
 
-    def _solver_settings(self, exu, settings: EngineSettings, plate, window: float):
+    def _solver_settings(self, exu, settings: EngineSettings, plate, window: float, cable: bool = False):
         s = exu.SimulationSettings()
         ti = s.timeIntegration
         ti.verboseMode = 0
@@ -399,6 +494,12 @@ class ExudynAdapter(EngineAdapter):
             ti.initialStepSize = settings.dt * 1e-2
         else:
             ti.minimumStepSize = min(ti.minimumStepSize, settings.dt * 1e-3)
+        if cable:
+            # ANCF coordinates are absolute (x ~ L): the residual's round-off floor is ~EA/l * L * 1e-16, about 1e-8
+            # of the initial residual at 100+ elements, where Newton's default relTol 1e-8 cannot be met (measured: the
+            # solver aborts); 1e-6 is reached in two iterations and changes no metric (< 1e-5 %, tested)
+            ti.newton.relativeTolerance = CABLE_NEWTON_RTOL
+            s.linearSolver.solverType = exu.LinearSolverType.EigenSparse
         return s, getattr(exu.DynamicSolverType, SOLVERS[integrator])
 
     # ------------------------------------------------------------------ pieces
@@ -429,6 +530,22 @@ class ExudynAdapter(EngineAdapter):
                                                               meshNodeNumbers=[int(i) for i in structure.contact_nodes],
                                                               weightingFactors=list(structure.contact_weights)))
         return marker, body["nGenericODE2"]
+
+    @staticmethod
+    def _add_cable(mbs, eii, cable: "_Cable"):
+        """The Euler-Bernoulli ANCF cable mesh (ObjectANCFCable2D, y up, axis at y = 0) with its supports as
+        CoordinateConstraints to the ground; returns (position marker of the impact node, node list)."""
+        mesh = cable.mesh
+        nodes = [mbs.AddNode(eii.NodePoint2DSlope1(referenceCoordinates=[float(x), 0.0, 1.0, 0.0])) for x in mesh.xs]
+        for i, l in enumerate(np.diff(mesh.xs)):
+            mbs.AddObject(eii.ObjectANCFCable2D(length=float(l), massPerLength=mesh.rho_a, bendingStiffness=mesh.ei,
+                                                axialStiffness=mesh.ea, nodeNumbers=[nodes[i], nodes[i + 1]]))
+        n_ground = mbs.AddNode(eii.NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+        m_ground = mbs.AddMarker(eii.MarkerNodeCoordinate(nodeNumber=n_ground, coordinate=0))
+        for c in mesh.fixed():
+            m_c = mbs.AddMarker(eii.MarkerNodeCoordinate(nodeNumber=nodes[int(c) // 4], coordinate=int(c) % 4))
+            mbs.AddObject(eii.CoordinateConstraint(markerNumbers=[m_ground, m_c]))
+        return mbs.AddMarker(eii.MarkerNodePosition(nodeNumber=nodes[mesh.impact_node])), nodes
 
     @staticmethod
     def _add_second_ball(mbs, eii, scene):
@@ -531,6 +648,13 @@ def _reference_modes_structure(beam, n: int) -> _Structure:
     from impactval.reference.beams import beam_modes, beam_shapes
 
     modes = beam_modes(beam, n)
+    if getattr(beam, "theory", "euler-bernoulli") != "euler-bernoulli":
+        # Timoshenko modes (deflection and rotation fields): the body needs only their omega, modal masses and
+        # deflection at the contact, so it is built like a modal target (one contact node carries phi)
+        s = _given_modes_structure(modes.omega, modes.modal_mass, modes.phi, 0.5 * beam.height,
+                                   f"FFRF reduced-order beam, reference's {n} Timoshenko modes")
+        s.diagnostics.update(beam_model="reference-modes", continuum_frequencies=modes.omega.tolist(), modes=n)
+        return s
     xs = np.unique(np.concatenate([np.linspace(0.0, beam.length, 2 * n + 3), [beam.impact_x]]))
     k_contact = int(np.argmin(np.abs(xs - beam.impact_x)))
     xs[k_contact] = beam.impact_x
@@ -560,13 +684,19 @@ def _modal_target_structure(scene) -> _Structure:
     """A structure given by its modes (omega, modal mass, phi at the impact point) as an FFRF body:
     one contact node carries the shape values, two more nodes (no modal motion) keep the frame's
     inertia regular; reduced matrices are diag(m_n) and diag(m_n omega_n^2)."""
+    target = scene.target
+    return _given_modes_structure(target.omega, target.modal_mass, target.phi, scene.ball.radius,
+                                  f"FFRF reduced-order body, {len(target.omega)} given modes")
+
+
+def _given_modes_structure(omega, modal_mass, phi, r: float, model: str) -> _Structure:
+    """An FFRF body with the given omega [rad/s], modal masses [kg] and shape values phi at the contact
+    point, contact radius r [m]."""
     import scipy.sparse as sp
 
-    target = scene.target
-    omega = np.asarray(target.omega, float)
-    mm = np.asarray(target.modal_mass, float)
-    phi = np.asarray(target.phi, float)
-    r = scene.ball.radius
+    omega = np.asarray(omega, float)
+    mm = np.asarray(modal_mass, float)
+    phi = np.asarray(phi, float)
     nodes = np.array([[0.0, -r, 0.0], [r, -r, 0.0], [0.0, -r, r]])
     mass = sp.diags(np.full(9, 1.0)).tocsr()
     basis = np.zeros((9, len(omega)))
@@ -574,7 +704,7 @@ def _modal_target_structure(scene) -> _Structure:
     return _Structure(nodes=nodes, mass=mass, stiffness=sp.csr_matrix((9, 9)), mode_basis=basis, omega=omega,
                       mass_reduced=np.diag(mm), stiffness_reduced=np.diag(mm * omega**2),
                       contact_nodes=np.array([0]), contact_weights=np.array([1.0]), phi_contact=phi.copy(),
-                      contact_point=nodes[0].copy(), radius=r, model=f"FFRF reduced-order body, {len(omega)} given modes",
+                      contact_point=nodes[0].copy(), radius=r, model=model,
                       diagnostics={"beam_model": "given-modes", "structure_frequencies": omega.tolist(),
                                    "continuum_frequencies": omega.tolist(), "modes": len(omega)})
 
@@ -587,7 +717,7 @@ def _fem_structure(beam, n: int, elements, use_cache: bool) -> _Structure:
     cont = _continuum(beam, n)
     centroid = fe.contact_weights @ fe.nodes[fe.contact_nodes]
     nx, ny, nz = fe.elements
-    diag = {"beam_model": "fem", "structure_frequencies": fe.omega.tolist(), "continuum_frequencies": cont.tolist(),
+    diag = {"beam_model": "solid", "structure_frequencies": fe.omega.tolist(), "continuum_frequencies": cont.tolist(),
             "frequency_error": (fe.omega / cont - 1.0).tolist(), "fe_elements": list(fe.elements),
             "fe_dof": fe.n_dof, "fe_build_s": fe.build_s, "fe_cached": fe.cached, "modes": n,
             "fe_mesher": "scikit-fem ElementHex2 (27-node hexahedra)"}
@@ -597,3 +727,54 @@ def _fem_structure(beam, n: int, elements, use_cache: bool) -> _Structure:
                       contact_point=centroid, radius=0.5 * beam.height,
                       model=f"FFRF reduced-order beam, {n} FE modes ({nx}x{ny}x{nz} hex27, {fe.n_dof} DOF)",
                       diagnostics=diag)
+
+
+@dataclass
+class _Cable:
+    """The Euler-Bernoulli ANCF cable mesh of a beam (exudyn_beam) with what the run reports."""
+
+    mesh: Any                         # exudyn_beam.HermiteBeam
+    sizing: Any                       # exudyn_beam.BeamSizing (n_elements, modes_that_matter, errors)
+    mass: Any                         # scipy CSR: the mesh's linear mass matrix, all coordinates (energy)
+    stiffness: Any                    # scipy CSR: its linear stiffness matrix
+    omega: np.ndarray                 # [rad/s] the mesh's bending frequencies of the modes that matter
+    model_error: tuple[float, float, float]
+    contact_point: np.ndarray         # [m] the impact node on the axis
+    radius: float                     # contact radius [m] (h/2: the ball touches the top face)
+    model: str
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+def _cable_structure(scene, mode_tol: float, modes: int | None, elements: int | None) -> _Cable:
+    """The ANCF mesh sized from the scene (exudyn_beam.elements_for, sized on the Euler-Bernoulli beam); its
+    model error is reported against the scene's own theory (so a Timoshenko scene shows the theory gap)."""
+    from impactval.engines.chain import euler_bernoulli
+    from impactval.engines.exudyn_beam import BeamSizing, elements_for, frequency_error, hermite_beam, model_error
+    from impactval.engines.exudyn_beam import modes_that_matter, TOL_FRACTION
+
+    eb = euler_bernoulli(scene)
+    beam = scene.target
+    if elements:
+        count = int(modes) if modes else modes_that_matter(eb, mode_tol)
+        mesh = hermite_beam(beam, int(elements))
+        sizing = BeamSizing(int(elements), count, frequency_error(beam, mesh, count), model_error(eb, mesh),
+                            TOL_FRACTION * mode_tol)
+    else:
+        sizing = elements_for(eb, mode_tol, modes)
+        mesh = hermite_beam(beam, sizing.n_elements)
+    me = sizing.model_error if eb is scene else model_error(scene, mesh)
+    import scipy.sparse as sp
+
+    mass, stiffness = (sp.csr_matrix(a) for a in mesh.matrices())
+    count = max(sizing.modes_that_matter, 1)
+    omega = mesh.frequencies()[:count]
+    cont = _continuum(beam, len(omega))
+    ne = mesh.n_elements
+    diag = {"beam_model": "fe-beam", "structure_frequencies": omega.tolist(), "continuum_frequencies": cont.tolist(),
+            "frequency_error": (omega / cont - 1.0).tolist(), "beam_elements": ne,
+            "modes_that_matter": sizing.modes_that_matter, "beam_coordinates": mesh.n_coordinates,
+            "beam_tol": sizing.tol}
+    return _Cable(mesh=mesh, sizing=sizing, mass=mass, stiffness=stiffness, omega=omega, model_error=tuple(me),
+                  contact_point=np.array([mesh.xs[mesh.impact_node], 0.0, 0.0]), radius=0.5 * beam.height,
+                  model=f"Euler-Bernoulli ANCF cable, {ne} ObjectANCFCable2D elements ({mesh.n_coordinates} coordinates)",
+                  diagnostics=diag)

@@ -43,3 +43,44 @@ def curve_error(result: ImpactResult, ref: ImpactResult) -> float:
     diff2 = (f_eng - f_ref) ** 2
     span = t[-1] - t[0]
     return float(math.sqrt(trapezoid(diff2, t) / span) / ref.f_m)
+
+
+# ---------------------------------------------------------------------------- where the error comes from
+METRICS = ("t_m", "f_m", "delta_m")
+
+
+def _finite(x) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return v if math.isfinite(v) else math.nan
+
+
+def structure_errors(diagnostics: dict | None) -> dict[str, float]:
+    """The engine's structure model against the scene's continuum, per metric: the adapter's plan
+    diagnostics `model_error_t_m/_f_m/_delta_m` (the reference solver run on the engine model's own
+    modes, relative to the scene's reference: signed fractions). NaN where the adapter reports none."""
+    diag = diagnostics or {}
+    return {m: _finite(diag.get(f"model_error_{m}")) for m in METRICS}
+
+
+def error_split(err: dict[str, float], structure: dict[str, float], hertz: bool) -> dict[str, float]:
+    """What the integrator and contact numerics add, per metric: err - structure (both signed
+    fractions of the scene's reference, so err = structure + numerics exactly). NaN when either part
+    is missing, and for a non-Hertz contact law (the structure part is measured with Hertz, so the
+    difference would also hold the contact law's model-form error)."""
+    if not hertz:
+        return dict.fromkeys(METRICS, math.nan)
+    return {m: err[m] - structure[m] if math.isfinite(err[m]) and math.isfinite(structure[m]) else math.nan
+            for m in METRICS}
+
+
+def vs_mujoco_c(diagnostics: dict | None) -> dict[str, float]:
+    """MuJoCo Warp against MuJoCo C on the identical model, per metric: the signed fractions
+    (Warp - C)/C of `diagnostics["vs_mujoco_c"]` (engines/mujoco_warp_.py); NaN when absent or when
+    either run failed (the dict then holds a status instead)."""
+    d = (diagnostics or {}).get("vs_mujoco_c")
+    if not isinstance(d, dict):
+        return dict.fromkeys(METRICS, math.nan)
+    return {m: _finite(d.get(m)) for m in METRICS}

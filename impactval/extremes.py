@@ -435,7 +435,8 @@ def run_map(scene, engines: Sequence[str], axes: Sequence[Axis], *, settings=Non
                 jobs.append(Job(sc, run_spec, st, tol))
     solved = {sc.name: (sc, tol, refs[sc.name]) for _, sc, _ in cells if not isinstance(refs[sc.name], str)}
     rows = execute(jobs, store=store, workers=workers, force=force, progress=progress, out=out,
-                   command=command or f"extremes {scene.name}", references=solved.values()) if jobs else []
+                   command=command or f"extremes {scene.name}", references=solved.values(),
+                   theory_gap=False) if jobs else []      # a map shows stability, not the beam-theory split
     rows_iter = iter(rows)
     out_rows = []
     for coords, sc, label, spec, st, lim, ref in meta:
@@ -614,7 +615,7 @@ def predictability(scene, engines: Sequence[str], dts: Iterable[float], *, setti
                 jobs.append(Job(sc, unguarded_spec(spec), st, tol))
                 keys.append((label, float(dt), sc.name))
     rows = dict(zip(keys, execute(jobs, store=store, workers=workers, command=f"predictability {scene.name}",
-                                  references=[(s, tol, refs[s.name]) for s in scenes])))
+                                  references=[(s, tol, refs[s.name]) for s in scenes], theory_gap=False)))
     out = []
     for label in engines:
         for dt in dts:

@@ -127,7 +127,10 @@ def load_results(path: str | Path, schema_version: int) -> pd.DataFrame:
     if missing:
         raise ImpactvalError(f"--baseline {p}: not a results.csv of impactval run (missing column {missing[0]!r}).")
     versions = set(pd.to_numeric(df["schema_version"], errors="coerce").dropna().astype(int))
-    if versions != {schema_version}:
+    from impactval.store import COMPARABLE_SCHEMAS     # schema 4 only added columns to 3
+
+    if not versions or not versions <= (set(COMPARABLE_SCHEMAS) if schema_version in COMPARABLE_SCHEMAS
+                                        else {schema_version}):
         raise ImpactvalError(f"--baseline {p}: results schema {sorted(versions)} cannot be compared with schema "
                              f"{schema_version}; rerun the baseline with this impactval version.")
     # several runs appended to one file: the newest row per key is the baseline

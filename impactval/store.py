@@ -18,6 +18,7 @@ concurrent runs lose nothing) or any URL SQLAlchemy understands (`postgresql://.
   (SI units, errors as signed fractions), plus `engine_version`, `adapter_version`,
   `reference_version`, `tol`, `settings`, `diagnostics`, `validity` (JSON text), `created_at` and
   `series` (optional: the engine's time series, `numpy.savez_compressed` bytes; see `load_series`).
+  Columns added since (`ADDED_JOB_COLUMNS`) are added to an older store's jobs table when it is opened.
 - `contacts(job_key, idx, t_start, t_end, f_max, delta_max)`: every contact phase of a job [s, N, m].
 - `run_jobs(run_id, job_key, position, reused)`: which jobs each run used, in its order.
 
@@ -45,8 +46,11 @@ import pandas as pd
 from impactval.errors import ImpactvalError
 
 STORE_SCHEMA_VERSION = 1
-#: results row schema (results.csv `schema_version`; 3: errors exported in %, job_key, new columns)
-SCHEMA_VERSION = 3
+#: results row schema (results.csv `schema_version`; 3: errors exported in %, job_key, new columns;
+#: 4: structure_err/numerics_err/theory_gap/vs_mujoco_c columns added, every schema-3 column unchanged)
+SCHEMA_VERSION = 4
+#: results schemas whose rows can be compared with this one (impactval.history): 4 only added columns
+COMPARABLE_SCHEMAS = (3, 4)
 
 
 class RunStatus(str, enum.Enum):
@@ -74,12 +78,23 @@ COLUMN_TYPES: dict[str, str] = {
     "n_contacts": _I, "n_steps": _I, "steps_per_s": _F,
     "wall_time_build_s": _F, "wall_time_step_s": _F, "wall_time_s": _F,
     "structure_frequencies": _T, "continuum_frequencies": _T,
+    # schema 4 (issue 17 item 2, issue 19): the error split per metric, the scene's theory gap, C vs Warp
+    **{f"{part}_{m}": _F for part in ("structure_err", "numerics_err", "theory_gap", "vs_mujoco_c")
+       for m in ("t_m", "f_m", "delta_m")},
+    "beam_theory": _T, "timoshenko_frequencies": _T,
 }
+#: job columns added after stores existed (results schema 4): added to an older store's jobs table when
+#: it is opened, its old rows reading NaN / "" there (as the runs table gets pid and host)
+ADDED_JOB_COLUMNS = tuple(c for c in COLUMN_TYPES if c.startswith(
+    ("structure_err_", "numerics_err_", "theory_gap_", "vs_mujoco_c_")) or c in ("beam_theory",
+                                                                                  "timoshenko_frequencies"))
 #: fraction columns exported in % as NAME_pct
 PERCENT_COLUMNS = ("err_t_m", "err_f_m", "err_delta_m", "err_curve", "lin_err_t_m", "lin_err_f_m",
-                   "lin_err_delta_m", "lin_err_curve", "energy_error", "model_error")
+                   "lin_err_delta_m", "lin_err_curve", "energy_error", "model_error",
+                   *(c for c in COLUMN_TYPES if c.startswith(("structure_err_", "numerics_err_", "theory_gap_",
+                                                              "vs_mujoco_c_"))))
 #: list-valued columns kept out of results.csv (they go to frequencies.csv, one row per mode)
-LIST_COLUMNS = ("structure_frequencies", "continuum_frequencies")
+LIST_COLUMNS = ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies")
 #: results.csv / results.parquet columns, in order
 EXPORT_COLUMNS = tuple(f"{c}_pct" if c in PERCENT_COLUMNS else c for c in COLUMN_TYPES if c not in LIST_COLUMNS)
 
@@ -234,6 +249,7 @@ class Store:
                         raise ImpactvalError(f"{self.url}: store schema {max(have)}, this impactval writes "
                                              f"{STORE_SCHEMA_VERSION}; use another --store.")
                 self._add_run_process_columns(sa)
+                self._add_job_columns(sa)
                 self.mark_dead_runs()
                 return
             except sa.exc.OperationalError:
@@ -279,6 +295,21 @@ class Store:
                     kind = {_I: "INTEGER", _T: "TEXT"}[_RUN_PROCESS_COLUMNS[col]]
                     guard = " IF NOT EXISTS" if self.engine.dialect.name == "postgresql" else ""   # two openers at once
                     c.execute(sa.text(f"ALTER TABLE runs ADD COLUMN{guard} {col} {kind}"))
+
+    def _add_job_columns(self, sa) -> None:
+        """A store written before the error-split, theory-gap and C-vs-Warp columns: add them (NULL,
+        read as NaN / "" for its old rows)."""
+        have = {c["name"] for c in sa.inspect(self.engine).get_columns("jobs")}
+        missing = [c for c in ADDED_JOB_COLUMNS if c not in have]
+        if missing:
+            prep = self.engine.dialect.identifier_preparer
+            # two openers at once: PostgreSQL skips what the other added; SQLite raises "duplicate column"
+            # (OperationalError) and _create retries, then finds nothing missing
+            guard = " IF NOT EXISTS" if self.engine.dialect.name == "postgresql" else ""
+            with self.engine.begin() as c:
+                for col in missing:
+                    kind = self.jobs.c[col].type.compile(dialect=self.engine.dialect)
+                    c.execute(sa.text(f"ALTER TABLE jobs ADD COLUMN{guard} {prep.quote(col)} {kind}"))
 
     # ------------------------------------------------------------------ runs
     def mark_dead_runs(self) -> list[str]:
@@ -463,11 +494,12 @@ def export_frame(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def frequencies_frame(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per (job, model, mode): job_key, scene, engine, segments, model ("engine" or
-    "continuum"), mode (1-based), omega_rad_s."""
+    """One row per (job, model, mode): job_key, scene, engine, segments, model ("engine", "continuum"
+    (Euler-Bernoulli, as the adapters report it) or "timoshenko"), mode (1-based), omega_rad_s."""
     recs = []
     for _, r in df.iterrows():
-        for col, label in (("structure_frequencies", "engine"), ("continuum_frequencies", "continuum")):
+        for col, label in (("structure_frequencies", "engine"), ("continuum_frequencies", "continuum"),
+                           ("timoshenko_frequencies", "timoshenko")):
             text = r.get(col, "")
             if isinstance(text, str) and text:
                 for i, w in enumerate(json.loads(text), start=1):

@@ -367,7 +367,7 @@ class EngineObjective:
         jobs = self.jobs(params)
         found = self.store.find({j.key for j in jobs}, REUSABLE_STATUSES)
         rows = execute(jobs, store=self.store, workers=self.workers, keep_series=self.keep_series,
-                       command="impactval tune")
+                       command="impactval tune", theory_gap=False)   # fits contact parameters: no beam-theory split
         self.record.evaluations += 1
         self.record.engine_runs += len({j.key for j in jobs} - set(found))
         self.record.jobs_reused += len(set(found))

@@ -78,6 +78,9 @@ _COLUMNS = (
     ("lin t_m %", lambda r: _pct(_col(r, "lin_err_t_m")), True),
     ("lin f_m %", lambda r: _pct(_col(r, "lin_err_f_m")), True),
     ("lin delta_m %", lambda r: _pct(_col(r, "lin_err_delta_m")), True),
+    ("C vs Warp t_m %", lambda r: _pct(_col(r, "vs_mujoco_c_t_m")), True),
+    ("C vs Warp f_m %", lambda r: _pct(_col(r, "vs_mujoco_c_f_m")), True),
+    ("C vs Warp delta_m %", lambda r: _pct(_col(r, "vs_mujoco_c_delta_m")), True),
     ("build ms", lambda r: _ms(_col(r, "wall_time_build_s")), True),
     ("step ms", lambda r: _ms(_col(r, "wall_time_step_s")), True),
     ("steps", lambda r: _int(_col(r, "n_steps")), True),
@@ -321,10 +324,12 @@ def markdown_report(df: pd.DataFrame, settings=None, *, info: Mapping[str, Any] 
     out += ["## Results", "",
             "Errors in % (engine - reference) / reference; `curve` is the RMS of f(t) - f_ref(t) over the first "
             "contact divided by the reference f_m; `lin` columns compare a native (linear) contact with the "
-            "linear-theory reference for the same spring; `contacts` counts contact phases in the simulated "
-            "window; wall times in ms. Columns empty in every row are left out.", ""]
+            "linear-theory reference for the same spring; `C vs Warp` columns (MuJoCo Warp rows) are "
+            "(Warp - C) / C on the identical model run in MuJoCo C; `contacts` counts contact phases in the "
+            "simulated window; wall times in ms. Columns empty in every row are left out.", ""]
     out += _md_table(header, cells, right)
     out.append("")
+    out += error_source_section(df)
     if references is not None and len(references):
         out += reference_section(references)
     bad = df[df["status"].astype(str) != "ok"]
@@ -333,13 +338,132 @@ def markdown_report(df: pd.DataFrame, settings=None, *, info: Mapping[str, Any] 
         for _, r in bad.iterrows():
             out.append(f"- {r['scene']} / {r['engine']}: **{r['status']}**: {' '.join(str(r['message']).split())}")
         out.append("")
-    if "structure_frequencies" in df:
-        freq = df[df["structure_frequencies"].fillna("").astype(str).str.len() > 0]
-        if len(freq):
-            out += ["## Structure model frequencies [rad/s] (engine model vs continuum)", ""]
-            for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
-                s, c = json.loads(r["structure_frequencies"]), json.loads(r["continuum_frequencies"])
-                pairs = ", ".join(f"{a:.1f} ({100 * (a / b - 1):+.2f} %)" for a, b in zip(s[:3], c[:3]))
-                out.append(f"- {r['scene']} / {r['engine']} (N = {_seg(r['segments'])}): {pairs}")
-            out.append("")
+    out += frequency_section(df)
     return "\n".join(out).rstrip() + "\n"
+
+
+#: modes listed per row in the frequency section
+N_MODES_SHOWN = 4
+
+
+def _freqs(r, key: str) -> list[float]:
+    text = r.get(key, "") if hasattr(r, "get") else ""
+    return json.loads(text) if isinstance(text, str) and text else []
+
+
+def frequency_section(df: pd.DataFrame) -> list[str]:
+    """Each engine structure model's lowest frequencies next to the continuum's: Euler-Bernoulli
+    (what the adapters report as continuum) and, for beams, Timoshenko."""
+    if "structure_frequencies" not in df:
+        return []
+    freq = df[df["structure_frequencies"].fillna("").astype(str).str.len() > 0]
+    if not len(freq):
+        return []
+    out = ["## Structure model frequencies [rad/s] (engine model vs continuum)", "",
+           "Each mode: the engine model's frequency, then its signed difference to the Euler-Bernoulli continuum "
+           "(EB) and, for beams, to the Timoshenko beam (both spectra in frequency order).", ""]
+    for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
+        s, c, t = (_freqs(r, k) for k in ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies"))
+        items = []
+        for i, a in enumerate(s[:N_MODES_SHOWN]):
+            diffs = [f"{label} {100 * (a / ref[i] - 1):+.2f} %" for label, ref in (("EB", c), ("Timoshenko", t))
+                     if i < len(ref) and ref[i] > 0]
+            items.append(f"{a:.1f}" + (f" ({', '.join(diffs)})" if diffs else ""))
+        out.append(f"- {r['scene']} / {r['engine']} (N = {_seg(r['segments'])}): {'; '.join(items)}")
+    return out + [""]
+
+
+#: a theory gap smaller than this (fraction, every metric) does not tell the two theories apart
+GAP_RESOLVED = 1e-3
+#: a structure error within this fraction of |gap| of a theory counts as "like" that theory
+GAP_LIKE = 0.25
+_THEORY = {"euler-bernoulli": "Euler-Bernoulli", "timoshenko": "Timoshenko"}
+_METRICS = ("t_m", "f_m", "delta_m")
+
+
+def _theory_verdict(r, scene_theory: str, other: str) -> str:
+    """Which beam theory the engine's structure model behaves like, when the numbers say so."""
+    s = [_num(_col(r, f"structure_err_{m}")) for m in _METRICS]
+    g = [_num(_col(r, f"theory_gap_{m}")) for m in _METRICS]
+    if not all(math.isfinite(x) for x in s + g):
+        return ""
+    if max(abs(x) for x in g) < GAP_RESOLVED:
+        return "; the two theories agree here, so the structure part is the model's own discretisation"
+    if all(abs(a - b) <= GAP_LIKE * abs(b) for a, b in zip(s, g)):
+        return f"; its structure model behaves like {_THEORY[other]}'s"
+    if all(abs(a) <= GAP_LIKE * abs(b) for a, b in zip(s, g)):
+        return f"; its structure model behaves like {_THEORY[scene_theory]}'s"
+    rest = " (the rest: the model's own discretisation or mode count)"
+    if all(abs(a - b) < abs(a) for a, b in zip(s, g)):
+        return f"; its structure model is closer to {_THEORY[other]}'s than to {_THEORY[scene_theory]}'s" + rest
+    if all(abs(a - b) > abs(a) for a, b in zip(s, g)):
+        return f"; its structure model is closer to {_THEORY[scene_theory]}'s than to {_THEORY[other]}'s" + rest
+    return ("; neither theory alone explains its structure error (the model's own discretisation or mode count "
+            "is part of it)")
+
+
+def _frequency_note(r) -> str:
+    """How far the model's first frequencies are from each theory's (largest |difference|), when both are known."""
+    s, c, t = (_freqs(r, k) for k in ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies"))
+    n = min(len(s), len(c), len(t), N_MODES_SHOWN)
+    if n == 0:
+        return ""
+
+    def worst(ref):
+        return max((s[i] / ref[i] - 1.0 for i in range(n)), key=abs)
+
+    return (f"; its first {n} frequencies differ by up to {100 * worst(t):+.2f} % from Timoshenko's, "
+            f"{100 * worst(c):+.2f} % from EB's")
+
+
+def error_source_section(df: pd.DataFrame) -> list[str]:
+    """"Where the error comes from": per engine row on a beam (or with a structure model error), the
+    error of each metric as structure (the engine's structure model vs the continuum) + numerics
+    (what its integrator and contact numerics add), and the scene's theory gap (the other beam
+    theory's reference vs this one)."""
+    cols = [f"{p}_{m}" for p in ("structure_err", "theory_gap") for m in _METRICS]
+    if not any(c in df for c in cols):
+        return []
+    ok = df[df["status"].astype(str) == "ok"]
+    has = ok[[c for c in cols if c in ok]].apply(pd.to_numeric, errors="coerce").notna().any(axis=1)
+    rows = ok[has]
+    if not len(rows):
+        return []
+    out = ["## Where the error comes from", "",
+           "Per metric, error = structure + numerics (signed, in % of the scene's reference): *structure* is the "
+           "engine's structure model against the scene's continuum (the reference solved on the model's own "
+           "modes), *numerics* what the engine's integrator and contact add. The *theory gap* is the reference "
+           "solved with the other beam theory against the scene's: the size of the structure-theory question.", ""]
+    for _, r in rows.iterrows():
+        scene = str(r["scene"])
+        theory = str(_col(r, "beam_theory") or "euler-bernoulli")
+        theory = theory if theory in _THEORY else "euler-bernoulli"
+        other = "timoshenko" if theory == "euler-bernoulli" else "euler-bernoulli"
+        label = ", ".join(x for x in (str(r["contact"]), f"dt = {_dt(r['dt'])} s",
+                                      f"N = {_seg(r['segments'])}" if _seg(r["segments"]) else "") if x)
+        parts = []
+        for m in _METRICS:
+            e, s, n = (_num(_col(r, f"{p}_{m}")) for p in ("err", "structure_err", "numerics_err"))
+            if math.isfinite(s) and math.isfinite(n):
+                parts.append(f"{m} {_pct(e)} % = structure {_pct(s)} % + numerics {_pct(n)} %")
+            elif math.isfinite(s):
+                why = "linear contact law: see the lin columns" if str(_col(r, "contact_law")) == "linear" \
+                    else "not split"
+                parts.append(f"{m} {_pct(e)} % (structure {_pct(s)} %; {why})")
+            else:
+                parts.append(f"{m} {_pct(e)} %")
+        line = f"- {scene} / {r['engine']} ({label}): " + "; ".join(parts)
+        if not any(math.isfinite(_num(_col(r, f"structure_err_{m}"))) for m in _METRICS):
+            line += " (the adapter reports no structure model error)"
+        gap = [_num(_col(r, f"theory_gap_{m}")) for m in _METRICS]
+        if any(math.isfinite(x) for x in gap):
+            line += (f". Theory gap {_short_theory(theory)} -> {_short_theory(other)}: "
+                     + ", ".join(f"{m} {_pct(x)} %" for m, x in zip(_METRICS, gap)))
+            line += _theory_verdict(r, theory, other) + _frequency_note(r)
+        out.append(line + ".")
+    return out + [""]
+
+
+def _short_theory(theory: str) -> str:
+    return "EB" if theory == "euler-bernoulli" else _THEORY.get(theory, theory)
+

@@ -182,19 +182,19 @@ def test_fe_frequencies_within_2_percent_of_euler_bernoulli():
 
 
 def test_fe_impact_within_target(adapter):
-    """FE modes (default model): impact vs the converged Euler-Bernoulli reference within the 3 % target,
-    FE frequencies reported next to the continuum's."""
+    """Solid FE modes (beam_model "solid", the old default "fem"): impact vs the converged Euler-Bernoulli reference
+    within the 3 % target, FE frequencies reported next to the continuum's."""
     from impactval.engines.exudyn_ import default_modes
 
     sc = impactval.load_scene("beam_ss_midspan")
     ref = impactval.solve(sc)
-    r = adapter.run(sc, EngineSettings(dt=1e-6, contact="native"))
+    r = adapter.run(sc, EngineSettings(dt=1e-6, contact="native", options=(("beam_model", "fem"),)))
     assert r.status == "ok", r.message
     err = rel(r, (ref.t_m, ref.f_m, ref.delta_m))
     assert np.all(np.abs(err) <= 0.03), err
     d = r.diagnostics
     n = default_modes(sc)
-    assert d["beam_model"] == "fem" and len(d["structure_frequencies"]) == len(d["continuum_frequencies"]) == n
+    assert d["beam_model"] == "solid" and len(d["structure_frequencies"]) == len(d["continuum_frequencies"]) == n
     assert abs(d["frequency_error"][0]) < 0.01
 
 
@@ -214,7 +214,8 @@ def test_fe_beam_explicit_and_implicit_agree(adapter):
     """The FE body under rk44 (constrained frame, the explicit-solver pitfall of engines.md) and
     generalized-alpha give the same impact: the FE error is the model's, not the integrator's."""
     sc = impactval.load_scene("beam_ss_midspan")
-    runs = [adapter.run(sc, EngineSettings(dt=1e-6, integrator=i, contact="native", modes=N_MODES))
+    runs = [adapter.run(sc, EngineSettings(dt=1e-6, integrator=i, contact="native", modes=N_MODES,
+                                           options=(("beam_model", "solid"),)))
             for i in ("generalized-alpha", "rk44")]
     assert all(r.status == "ok" for r in runs)
     assert np.all(np.abs(rel(runs[1], (runs[0].t_m, runs[0].f_m, runs[0].delta_m))) <= 5e-4)

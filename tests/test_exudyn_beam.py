@@ -1,0 +1,291 @@
+"""Exudyn's Euler-Bernoulli FE beam (issue 11): the ANCF cable mesh (engines/exudyn_beam.py) and its rows.
+
+Independent checks: the mesh's frequencies against the closed-form Euler-Bernoulli ones (and their h^4
+convergence), its static flexibility against the closed form (a Hermite mesh is exact at its nodes),
+Exudyn's own linearised eigenvalues of the ANCF mesh against the numpy model, and the impact against
+the converged reference on every tests/unseen beam and the catalogue's Euler-Bernoulli beams
+(issue 11's bars: 2 % with every default, 0.5 % with the reference's own modes; the solid model
+against the Timoshenko reference on the stubby Timoshenko scene).
+"""
+import glob
+import math
+import os
+
+import numpy as np
+import pytest
+
+import impactval
+from impactval.engines.base import EngineSettings, execute_job
+from impactval.engines.exudyn_beam import element_grid, elements_for, hermite_beam, model_error
+from impactval.reference.beams import beam_frequencies, beam_static_flexibility
+from conftest import requires_exudyn
+
+HERE = os.path.dirname(__file__)
+UNSEEN = sorted(glob.glob(os.path.join(HERE, "unseen", "*.toml")))
+EB_UNSEEN = [p for p in UNSEEN if "timoshenko" not in os.path.basename(p)]
+CATALOGUE_EB = ["beam_ss_midspan", "beam_ss_quarter", "beam_cc_midspan", "beam_cantilever_tip",
+                "heavy_ball_slender_beam", "light_ball_heavy_beam"]
+SUPPORT_SCENES = {"simply-supported": "beam_ss_midspan", "clamped-clamped": "beam_cc_midspan",
+                  "cantilever": "beam_cantilever_tip"}
+
+
+def _beam(support: str, impact_at: float | None = None):
+    import dataclasses
+
+    sc = impactval.load_scene(SUPPORT_SCENES[support])
+    if impact_at is None:
+        return sc.target
+    return dataclasses.replace(sc.target, impact_at=impact_at)
+
+
+def _closed(beam, n):
+    m = beam.material
+    return beam_frequencies(beam.support, n, beam.length, m.young, beam.second_moment, m.density, beam.area)
+
+
+# ---------------------------------------------------------------------------- the mesh (numpy, no exudyn needed)
+
+@pytest.mark.parametrize("support", list(SUPPORT_SCENES))
+def test_mesh_frequencies_converge_to_euler_bernoulli(support):
+    """Bending frequencies of the Hermite/ANCF mesh vs the closed form: within 2e-4 for the first six modes
+    at 40 elements, above it (a consistent-mass conforming mesh bounds from above), and h^4 convergence."""
+    beam = _beam(support)
+    cont = _closed(beam, 6)
+    err40 = hermite_beam(beam, 40).frequencies()[:6] / cont - 1
+    err80 = hermite_beam(beam, 80).frequencies()[:6] / cont - 1
+    assert np.all(err40 >= -1e-9) and np.all(err40 <= 2e-4), err40
+    assert err40[5] / err80[5] > 12.0, (err40[5], err80[5])       # 16 for h^4
+
+
+@pytest.mark.parametrize("support, impact_at", [("simply-supported", 0.5), ("simply-supported", 0.3),
+                                                ("clamped-clamped", 0.5), ("clamped-clamped", 0.37),
+                                                ("cantilever", 1.0), ("cantilever", 0.55)])
+def test_mesh_static_flexibility_is_exact_and_modes_complete(support, impact_at):
+    """A Hermite mesh is statically exact at its nodes: flexibility at the impact node = closed form (any N);
+    the mesh's modes, summed as phi^2/omega^2 (modal mass 1), give the same number (complete modal basis)."""
+    beam = _beam(support, impact_at)
+    m = beam.material
+    exact = beam_static_flexibility(beam.support, beam.length, m.young, beam.second_moment, beam.impact_x)
+    for n in (5, 17):
+        mesh = hermite_beam(beam, n)
+        assert mesh.xs[mesh.impact_node] == pytest.approx(beam.impact_x, rel=1e-12)
+        assert mesh.static_flexibility() == pytest.approx(exact, rel=1e-9)
+        md = mesh.modes()
+        assert float(np.sum(md.phi**2 / (md.modal_mass * md.omega**2))) == pytest.approx(exact, rel=1e-8)
+
+
+def test_grid_has_a_node_at_the_impact_point():
+    beam = _beam("simply-supported", 0.4321)
+    xs, k = element_grid(beam, 11)
+    assert len(xs) == 12 and xs[k] == pytest.approx(0.4321 * beam.length) and np.all(np.diff(xs) > 0)
+
+
+def test_sizing_meets_its_tolerance_on_the_heavy_slender_beam():
+    """heavy_wc_slender: the modes the scene needs (required_modes(.., 1e-2).count) within tol = 0.5 % in
+    frequency, and the mesh's model error within tol; a coarser mesh misses (the criterion bites)."""
+    from impactval.reference.modechoice import required_modes
+
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", "heavy_wc_slender.toml"))
+    s = elements_for(sc, 1e-2)
+    assert s.modes_that_matter == required_modes(sc, 1e-2).count
+    assert s.frequency_error <= s.tol == 5e-3
+    assert s.largest <= s.tol
+    coarse = hermite_beam(sc.target, s.n_elements // 2)
+    assert coarse.frequencies()[s.modes_that_matter - 1] / _closed(sc.target, s.modes_that_matter)[-1] - 1 > s.tol
+
+
+# ---------------------------------------------------------------------------- in Exudyn
+
+@pytest.fixture(scope="module")
+def adapter():
+    from impactval.engines.exudyn_ import ExudynAdapter
+
+    return ExudynAdapter()
+
+
+def _rel(r, ref):
+    return np.array([r.t_m / ref.t_m - 1, r.f_m / ref.f_m - 1, r.delta_m / ref.delta_m - 1])
+
+
+@requires_exudyn
+@pytest.mark.parametrize("support", list(SUPPORT_SCENES))
+def test_exudyn_linearised_ancf_mesh_is_the_numpy_mesh(support):
+    """Exudyn's own eigenvalues of the ObjectANCFCable2D mesh (linearised at the straight beam, supports as
+    constrained coordinates) equal the numpy Hermite model's bending and axial frequencies."""
+    import exudyn as exu
+    import exudyn.itemInterface as eii
+
+    from impactval.engines.exudyn_ import ExudynAdapter, _cable_structure
+
+    sc = impactval.load_scene(SUPPORT_SCENES[support])
+    cable = _cable_structure(sc, 1e-2, None, 10)
+    mbs = exu.SystemContainer().AddSystem()
+    ExudynAdapter._add_cable(mbs, eii, cable)
+    mbs.Assemble()
+    vals, _ = exu.solver.ComputeODE2Eigenvalues(mbs, constrainedCoordinates=[int(c) for c in cable.mesh.fixed()],
+                                                ignoreAlgebraicEquations=True)
+    got = np.sort(np.sqrt(np.abs(vals)))
+    from scipy import linalg
+
+    mass, stiff = cable.mesh.matrices()
+    free = np.setdiff1d(np.arange(cable.mesh.n_coordinates), cable.mesh.fixed())
+    want = np.sort(np.sqrt(np.abs(linalg.eigh(stiff[np.ix_(free, free)], mass[np.ix_(free, free)], eigvals_only=True))))
+    assert len(got) == len(want)
+    assert got == pytest.approx(want, rel=1e-6)
+
+
+@requires_exudyn
+@pytest.mark.parametrize("name", [os.path.basename(p) for p in EB_UNSEEN] + CATALOGUE_EB)
+def test_default_row_within_two_percent(adapter, name):
+    """Issue 11 bar: every default (Euler-Bernoulli scene -> fe-beam, dt auto, generalized-alpha): status ok,
+    |error| <= 2 % in t_m, f_m, delta_m against the converged reference, and within the row's own model_error
+    + 0.1 % (its claimed bound; the 0.1 % is time integration at the automatic step)."""
+    path = os.path.join(HERE, "unseen", name) if name.endswith(".toml") else name
+    sc = impactval.load_scene(path)
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    assert r.model.startswith("Euler-Bernoulli ANCF cable") and r.diagnostics["beam_model"] == "fe-beam"
+    err = _rel(r, ref)
+    assert np.all(np.abs(err) <= 0.02), err
+    assert np.all(np.abs(err) <= r.model_error + 1e-3), (err, r.model_error)
+    d = r.diagnostics
+    assert max(abs(d[k]) for k in ("model_error_t_m", "model_error_f_m", "model_error_delta_m")) == r.model_error
+    assert r.n_steps == len(r.t) - 1 <= d["steps_simulated"]
+    assert r.settings["segments"] == d["beam_elements"]          # the run table's N column
+
+
+@requires_exudyn
+@pytest.mark.parametrize("name", [os.path.basename(p) for p in UNSEEN])
+def test_reference_modes_within_half_percent(adapter, name):
+    """Issue 11 bar: --option exudyn.beam_model=reference-modes within 0.5 % of the converged reference of the
+    scene's own theory (the heavy ball on the slender Timoshenko beam needs the 120-mode cap: +0.45 % in f_m)."""
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", name))
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings(options=(("beam_model", "reference-modes"),)))
+    assert r.status == "ok", r.message
+    assert np.all(np.abs(_rel(r, ref)) <= 5e-3), _rel(r, ref)
+
+
+@requires_exudyn
+def test_solid_is_the_default_for_timoshenko_and_meets_its_reference(adapter):
+    """A Timoshenko scene gets the solid (3-D elasticity, shear-deformable) model by default; on the stubby
+    Timoshenko beam it is within 2 % of the Timoshenko reference."""
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", "stubby_steel_timoshenko.toml"))
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    assert "hex27" in r.model and r.diagnostics["beam_model"] == "solid"
+    assert np.all(np.abs(_rel(r, ref)) <= 0.02), _rel(r, ref)
+
+
+@requires_exudyn
+def test_coarse_mesh_error_is_predicted_by_model_error(adapter):
+    """A deliberately coarse mesh (option beam_elements = 4) is off by a visible amount; the run's
+    model_error (the reference on the mesh's own modes) predicts the measured error within 0.05 %."""
+    sc = impactval.load_scene("beam_ss_quarter")
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings(options=(("beam_elements", 4),)))
+    assert r.status == "ok", r.message
+    assert r.diagnostics["beam_elements"] == 4
+    err = _rel(r, ref)
+    pred = np.array([r.diagnostics[k] for k in ("model_error_t_m", "model_error_f_m", "model_error_delta_m")])
+    assert np.max(np.abs(err)) > 2e-3, err
+    assert np.all(np.abs(err - pred) <= 5e-4), (err, pred)
+    assert np.array_equal(pred, model_error(sc, hermite_beam(sc.target, 4)))
+
+
+@requires_exudyn
+def test_newton_tolerance_of_the_mesh_changes_nothing(adapter, monkeypatch):
+    """The mesh runs with Newton relTol 1e-6 (round-off floor of absolute coordinates); on a mesh where
+    Exudyn's default 1e-8 still converges, both give the same metrics to 1e-7."""
+    import impactval.engines.exudyn_ as ex
+
+    sc = impactval.load_scene("beam_ss_midspan")
+    s = EngineSettings(options=(("beam_elements", 24),))
+    loose = adapter.run(sc, s)
+    monkeypatch.setattr(ex, "CABLE_NEWTON_RTOL", 1e-8)
+    tight = ex.ExudynAdapter().run(sc, s)
+    assert loose.status == tight.status == "ok"
+    assert np.all(np.abs(_rel(loose, tight)) <= 1e-7), _rel(loose, tight)
+
+
+@requires_exudyn
+def test_explicit_rk44_on_the_mesh_agrees_and_respects_its_limit(adapter):
+    """rk44 on the mesh: the predicted limit includes the axial modes; the automatic step is under it and
+    agrees with generalized-alpha within 0.02 %; a step above the limit is refused with the limit in s."""
+    sc = impactval.load_scene("beam_ss_midspan")
+    ga = adapter.run(sc, EngineSettings())
+    rk = adapter.run(sc, EngineSettings(integrator="rk44"))
+    assert rk.status == "ok", rk.message
+    assert rk.dt <= rk.dt_limit < math.inf
+    assert np.all(np.abs(_rel(rk, ga)) <= 2e-4), _rel(rk, ga)
+    bad = adapter.run(sc, EngineSettings(integrator="rk44", dt=1e-6))
+    assert bad.status.failed and f"{rk.dt_limit:.3g}" in bad.message, bad.message
+
+
+@requires_exudyn
+def test_automatic_step_solvers_on_the_mesh_are_a_skipped_row():
+    sc = impactval.load_scene("beam_ss_midspan")
+    r = execute_job("exudyn", sc, EngineSettings(integrator="dopri5"))
+    assert r.status == "skipped" and "beam_model" in r.message, r.message
+
+
+@requires_exudyn
+@pytest.mark.parametrize("value", ["1", "many", 2.5, 0])
+def test_bad_beam_elements_names_the_field(adapter, value):
+    from impactval.errors import EngineError
+
+    with pytest.raises(EngineError, match="beam_elements"):
+        adapter.check_settings(EngineSettings(options=(("beam_elements", value),)))
+
+
+@requires_exudyn
+def test_fem_is_an_alias_of_solid(adapter):
+    from impactval.engines.exudyn_ import beam_model_of
+
+    sc = impactval.load_scene("beam_ss_midspan")
+    for given, want in (("fem", "solid"), ("solid", "solid"), ("fe-beam", "fe-beam"), (None, "fe-beam")):
+        opts = () if given is None else (("beam_model", given),)
+        assert beam_model_of(sc, adapter.check_settings(EngineSettings(options=opts))) == want
+
+
+@requires_exudyn
+def test_reference_modes_on_a_timoshenko_scene(adapter):
+    """beam_model=reference-modes on a Timoshenko scene uses the Timoshenko reference's modes (regression: it
+    crashed comparing them with Euler-Bernoulli shapes) and is within 0.5 % of that reference."""
+    sc = impactval.load_scene("beam_ss_stubby_timoshenko")
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings(options=(("beam_model", "reference-modes"),)))
+    assert r.status == "ok", r.message
+    assert "Timoshenko" in r.model
+    assert np.all(np.abs(_rel(r, ref)) <= 5e-3), _rel(r, ref)
+
+
+@requires_exudyn
+@pytest.mark.slow
+def test_solid_on_the_heavy_slender_timoshenko_scene(adapter):
+    """The heavy WC ball on the slender beam in Timoshenko theory: the solid default (60 FE modes, 122 x 1 x 1
+    hex27; a ~90 s FE build under load, cached afterwards) within 2 % of the Timoshenko reference (measured
+    -1.03 / +1.88 / +1.25 %: its highest modes are stiffer than Timoshenko's, docs/exudyn.md)."""
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", "heavy_wc_slender_timoshenko.toml"))
+    ref = impactval.solve(sc, tol=1e-5)
+    r = adapter.run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    assert r.diagnostics["beam_model"] == "solid"
+    assert np.all(np.abs(_rel(r, ref)) <= 0.02), _rel(r, ref)
+
+
+@requires_exudyn
+@pytest.mark.parametrize("contact", ["native", "hertz"])
+def test_linear_law_on_the_mesh_matches_the_linear_theory(adapter, contact):
+    """The k0 spring (option law = linear) on the fe-beam against the exact linear theory (sum of sines,
+    reference/linear.py) for the same spring: within 0.1 % (measured <= 0.015 %); native = injected."""
+    from impactval.reference.linear import solve_linear
+
+    sc = impactval.load_scene(os.path.join(HERE, "unseen", "heavy_wc_slender.toml"))
+    r = adapter.run(sc, EngineSettings(contact=contact, options=(("law", "linear"),)))
+    assert r.status == "ok", r.message
+    assert r.contact_law.kind == "linear"
+    lin = solve_linear(sc, tol=1e-6, stiffness=r.contact_law.coefficient)
+    assert np.all(np.abs(_rel(r, lin)) <= 1e-3), _rel(r, lin)
