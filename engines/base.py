@@ -477,18 +477,13 @@ class SteppingAdapter(EngineAdapter):
         try:
             build_s = time.perf_counter() - t0
             freqs = np.asarray(self.frequencies(model), float)
+            # per-step work kept small (benchmarks/bench_sweep_overhead.py counts it): locals instead of
+            # attribute and global lookups, one tuple per step, the sample time rebuilt from k afterwards
             cols: list[tuple[float, ...]] = []
+            append = cols.append
             step, contact, energy, kin, observe = self.step, self.contact, self.energy, self.kinematics, self.observe
-            clock = time.perf_counter
-
+            clock, isfinite = time.perf_counter, math.isfinite
             lag = self.sample_lag
-
-            def sample(k: int) -> tuple[float, float, float]:
-                observe(model)          # not timed: the stepping time is the engine's step alone
-                d, f = contact(model)
-                e = energy(model)
-                cols.append(((k - lag) * dt, d, f, *kin(model), e))
-                return d, f, e
 
             step_s, k = 0.0, 0
             if lag:                # the first step's report describes the initial state
@@ -496,18 +491,26 @@ class SteppingAdapter(EngineAdapter):
                 step(model)
                 step_s += clock() - ts
                 k = 1
-            _, _, e0 = sample(k)
-            touched, t_end, stop = False, math.inf, ""
+            k_first = k
+            observe(model)          # not timed: the stepping time is the engine's step alone
+            d, f = contact(model)
+            e0 = energy(model)
+            append((d, f, *kin(model), e0))
+            e_stop = STOP_ENERGY_FACTOR * e0
+            touched, ended, stop = False, False, ""
             while k < n_max:
                 ts = clock()
                 step(model)
                 step_s += clock() - ts
                 k += 1
-                d, f, e = sample(k)
-                if not (math.isfinite(d) and math.isfinite(f) and math.isfinite(e)):
+                observe(model)
+                d, f = contact(model)
+                e = energy(model)
+                append((d, f, *kin(model), e))
+                if not (isfinite(d) and isfinite(f) and isfinite(e)):
                     stop = "nan"
                     break
-                if e > STOP_ENERGY_FACTOR * e0:
+                if e > e_stop:
                     stop = "energy"
                     break
                 if d > through:
@@ -515,12 +518,13 @@ class SteppingAdapter(EngineAdapter):
                     break
                 if f > 0:
                     touched = True
-                elif touched and d <= 0 and t_end == math.inf:
-                    t_end = (k - lag) * dt
+                elif touched and d <= 0 and not ended:
+                    ended = True
                     n_max = min(n_max, k + int(math.ceil(settings.tail / dt)))
-            arr = np.asarray(cols, float).reshape(-1, 7)
-            sim = Simulation(t=arr[:, 0], delta=arr[:, 1], f=arr[:, 2], x_ball=arr[:, 3], x_structure=arr[:, 4],
-                             v_ball=arr[:, 5], energy=arr[:, 6], build_s=build_s, step_s=step_s, n_steps=k,
+            arr = np.asarray(cols, float).reshape(-1, 6)
+            t = (np.arange(k_first, k_first + len(arr)) - lag) * dt
+            sim = Simulation(t=t, delta=arr[:, 0], f=arr[:, 1], x_ball=arr[:, 2], x_structure=arr[:, 3],
+                             v_ball=arr[:, 4], energy=arr[:, 5], build_s=build_s, step_s=step_s, n_steps=k,
                              model=self.describe(model), stop=stop, frequencies=freqs)
         finally:
             self.close(model)
@@ -551,9 +555,70 @@ def _parabola_peak(t: np.ndarray, y: np.ndarray, k: int) -> float:
     return float(max(y1, a * x * x + b * x + c))
 
 
+#: samples of the polynomial a peak is read from (degree PEAK_POINTS - 1): its read-out error is
+#: O(dt^PEAK_POINTS), beyond the order of every integrator the adapters use (RK4: 4); a parabola's
+#: O(dt^3) error, whose constant oscillates with where the peak falls between samples, swamped the
+#: O(dt^2.5) differences of RK4 runs on beams and made their fitted orders scatter
+PEAK_POINTS = 5
+
+
+def _peak(t: np.ndarray, y: np.ndarray, k: int, lo: int, hi: int) -> float:
+    """Peak value near sample k (the largest sample of y[lo:hi]) read from the interpolating polynomial
+    through PEAK_POINTS samples of [lo, hi) around k (one contact's samples: the force's kink at touch
+    and separation stays outside): its largest critical value within one sample of k. Falls back to
+    the parabola through k-1, k, k+1 when the contact has fewer samples, the polynomial has no maximum
+    there, or it moves the parabola's peak by more than the samples' own curvature (an unresolved peak)."""
+    par = _parabola_peak(t, y, k)
+    if hi - lo < PEAK_POINTS or k <= lo or k >= hi - 1:
+        return par
+    a = min(max(k - PEAK_POINTS // 2, lo), hi - PEAK_POINTS)
+    tt, yy = t[a:a + PEAK_POINTS], y[a:a + PEAK_POINTS]
+    h = 0.5 * (t[k + 1] - t[k - 1])
+    if not (h > 0 and np.all(np.isfinite(yy))):
+        return par
+    x = (tt - t[k]) / h                                  # O(1) abscissae: a well-conditioned Vandermonde
+    coef = np.linalg.solve(np.vander(x), yy - y[k])
+    poly = np.poly1d(coef)
+    x_lo, x_hi = (t[k - 1] - t[k]) / h, (t[k + 1] - t[k]) / h
+    crit = [r.real for r in poly.deriv().roots if abs(r.imag) <= 1e-9 * max(1.0, abs(r)) and x_lo <= r.real <= x_hi]
+    crit = [r for r in crit if poly.deriv(2)(r) < 0]
+    if not crit:
+        return par
+    peak = float(y[k] + max(poly(r) for r in crit))
+    curvature = y[k] - min(y[k - 1], y[k + 1])
+    if not (peak >= y[k] and abs(peak - par) <= curvature):
+        return par
+    return peak
+
+
+def _zero_crossing(t: np.ndarray, y: np.ndarray, a: int, linear: float) -> float:
+    """Where y crosses 0 between samples a and a+1, from the cubic through four samples around them
+    (two each side where the series has them): read-out error O(dt^4) where y is smooth, O(dt^3) across
+    a jump of its third derivative (a contact force that vanishes at delta = 0: Hertz or a linear
+    spring), instead of the O(dt^2) of the straight line (`linear`, kept when the samples do not bracket
+    a sign change, the series is too short or the cubic has no root between them)."""
+    n = len(y)
+    if n < 4 or not (y[a] > 0 >= y[a + 1] or y[a] <= 0 < y[a + 1]):
+        return linear
+    lo = min(max(a - 1, 0), n - 4)
+    h = t[a + 1] - t[a]
+    yy = y[lo:lo + 4]
+    if not (h > 0 and np.all(np.isfinite(yy))):
+        return linear
+    x = (t[lo:lo + 4] - t[a]) / h
+    roots = np.poly1d(np.linalg.solve(np.vander(x), yy)).roots
+    inside = [r.real for r in roots if abs(r.imag) <= 1e-9 and 0.0 <= r.real <= 1.0]
+    if not inside:
+        return linear
+    x_lin = (linear - t[a]) / h
+    return float(t[a] + h * min(inside, key=lambda r: abs(r - x_lin)))
+
+
 def contacts_from_series(t: np.ndarray, delta: np.ndarray, f: np.ndarray) -> tuple[Contact, ...]:
     """Contact phases from per-step samples: a contact is a run of samples with f > 0; its start and
-    end are where delta crosses 0 (linear interpolation), its peaks are parabola-refined."""
+    end are where delta crosses 0 (the cubic through four samples around the crossing, `_zero_crossing`),
+    its peaks are read from the quartic through
+    the five samples of the contact around the largest one (`_peak`, error O(dt^5))."""
     on = f > 0
     out = []
     i, n = 0, len(t)
@@ -574,13 +639,13 @@ def contacts_from_series(t: np.ndarray, delta: np.ndarray, f: np.ndarray) -> tup
             da, db = delta[a], delta[b]
             if da == db:
                 return float(t[b])
-            return float(t[a] + (0.0 - da) * (t[b] - t[a]) / (db - da))
+            return _zero_crossing(t, delta, a, float(t[a] + (0.0 - da) * (t[b] - t[a]) / (db - da)))
 
         t_start = cross(s - 1, s)
         t_end = cross(e - 1, e) if e < n else math.nan
         kf = s + int(np.argmax(f[s:e]))
         kd = s + int(np.argmax(delta[s:e]))
-        out.append(Contact(t_start, t_end, _parabola_peak(t, f, kf), _parabola_peak(t, delta, kd)))
+        out.append(Contact(t_start, t_end, _peak(t, f, kf, s, e), _peak(t, delta, kd, s, e)))
     return tuple(out)
 
 

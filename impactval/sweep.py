@@ -409,14 +409,17 @@ def explain_order(engine: str, integrator: str, metric: str, order: float, targe
     return text
 
 
+#: how the metrics are read from the samples (engines.base.contacts_from_series), for the explanations
+READOUT = ("f_m and delta_m are read from the quartic through five samples around the peak, an O(dt^5) "
+           "read-out, and t_m's end from the cubic through four samples around delta's zero crossing, O(dt^3) or "
+           "better")
+
+
 def _explain_order(engine: str, integrator: str, metric: str, order: float, target_kind: str, contact: str) -> str:
     nominal, name = _nominal(engine, integrator)
     if not math.isfinite(order):
-        if metric == "t_m" and target_kind != "rigid-plate":
-            return ("no clean power law: t_m is read by linear interpolation of delta between the two steps around "
-                    "touch and separation; on a flexible target delta is curved there, so that read-out error "
-                    "(O(dt^2)) depends on where the steps fall and scatters")
-        return "no dt range with a clean power law in this grid (points scatter, change sign or sit on a floor)"
+        return ("no dt range with a clean power law in this grid (points scatter, change sign or sit on a floor; "
+                "the read-out is not the cause: " + READOUT + ")")
     if not math.isfinite(nominal):
         return f"nominal order of {name} unknown"
     head = f"{name}, nominal order {nominal:g}: "
@@ -427,16 +430,10 @@ def _explain_order(engine: str, integrator: str, metric: str, order: float, targ
                        "does (it is Verlet with the velocity sampled half a step off); t_m, f_m and delta_m are read "
                        "from positions and position-dependent forces, so they inherit Verlet's second order, while "
                        "velocities stay first order")
-    if metric == "t_m" and abs(order - 1) <= 0.25 and nominal > 1 and target_kind not in ("", "rigid-plate"):
-        return head + ("observed order 1 in t_m, likely from the read-out: t_m ends where delta's zero crossing is "
-                       "interpolated linearly between two steps, and when the ball leaves a flexible target with "
-                       "little relative speed delta meets zero almost tangentially, so that read-out errs by O(dt) "
-                       "(compare the size of the changes with the other metrics: it is usually tiny)")
     if order < nominal and contact in ("hertz", "native-hertz") and order >= 1.8:
         why = ("the Hertz force f ~ delta^1.5 is not smooth at touch and separation (its second derivative is "
                "infinite there), which caps a fixed-step method near order 2.5 whatever its nominal order")
-        if metric == "t_m" and target_kind not in ("", "rigid-plate"):
-            why += ("; t_m is also read by linear interpolation of delta between two steps, an O(dt^2) read-out")
+        why += f" ({READOUT}: finer than this order, so it is the integration's)"
         return head + "lower observed order because " + why
     if order < nominal and contact == "native":
         return head + ("lower observed order: the engine's native contact switches on and off between "
