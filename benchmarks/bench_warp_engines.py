@@ -9,7 +9,7 @@ to 5e-8 for C and Warp; the worked and two unseen beams (MuJoCo C's own chain, t
 identical model, Newton); the chain's tree root and size limits in float32; the first unstable dt on the
 plate (the energy measure). Several minutes; not a test.
 
-Run: python benchmarks/bench_warp_engines.py
+Run: python benchmarks/bench_warp_engines.py   (Newton's beams only: ... newton)
 """
 from __future__ import annotations
 
@@ -61,12 +61,10 @@ def main() -> None:
         for contact in ("native", "hertz"):
             line("mujoco", beam, dt="auto", contact=contact)                       # MuJoCo C's own chain
             line("mujoco-warp", beam, dt="auto", contact=contact)                  # + C on the identical model
-        line("newton", beam, dt=1e-6 if "midspan" in beam else "auto", contact="native")
     for contact in ("native", "hertz"):
         line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact=contact)
-        line("newton", "beam_ss_midspan", dt=1e-6, contact=contact)
-    line("newton", "beam_ss_midspan", dt=1e-6, contact="native", options=(("attach_ke", 3e9),))
     line("newton", "beam_ss_midspan", dt=1e-6, contact="native", integrator="xpbd")
+    newton_beams()
     for root in ("end", "middle"):           # float32: the serial chain vs the tree rooted at its middle
         line("mujoco-warp", "beam_ss_midspan", dt=1e-6, contact="hertz", segments=81, options=(("chain_root", root),))
     for n in (121, 161):                     # the section chain's float32 limit
@@ -76,6 +74,29 @@ def main() -> None:
          options=(("rotary_inertia", "none"),))
     for engine in ("mujoco", "mujoco-warp", "newton"):   # the energy measure: first unstable dt on the plate
         onset(engine)
+
+
+def newton_beams() -> None:
+    """Newton SemiImplicit on the worked and the five unseen beams with its own sizing (attach_ke at the float32
+    cap, N with the penalty joints' give <= 0.5 %): the row's error next to the predicted model_error split
+    (rigid-jointed chain + give, exact linear theory); then the old 41-segment chain at attach_ke 1e9 / 3e9 (the
+    cancellation) and the float32 energy growth against attach_ke at N = 61 (python ... newton)."""
+    from impactval.engines.newton_ import NewtonAdapter
+
+    adapter = NewtonAdapter()
+    for beam in ["beam_ss_midspan"] + sorted(str(p) for p in UNSEEN.glob("*.toml")):
+        for contact in ("native", "hertz"):
+            s = adapter.check_settings(EngineSettings(dt="auto", contact=contact))
+            d = adapter.plan(impactval.load_scene(beam), s).diagnostics
+            print(f"{'':12s} {Path(beam).stem:20s} predicted f_m: rigid chain {100 * d['model_error_rigid_f_m']:+.3f} % "
+                  f"(Hertz), give {100 * d['penalty_give_f_m']:+.3f} % (linear), model_error "
+                  f"{100 * d['model_error_f_m']:+.3f} %; attach_ke {d['attach_ke']:.3g}, "
+                  f"shear fraction {d['penalty_shear_fraction']:.3f}", flush=True)
+            line("newton", beam, dt="auto", contact=contact)
+    for ke in (1e9, 3e9):
+        line("newton", "beam_ss_midspan", dt="auto", contact="native", segments=41, options=(("attach_ke", ke),))
+    for ke in (3e9, 6e9, 1e10, 3e10):         # float32: energy growth (dt-independent) against attach_ke
+        line("newton", "beam_ss_midspan", dt=2e-7, contact="native", segments=61, options=(("attach_ke", ke),))
 
 
 def onset(engine: str) -> None:
@@ -93,4 +114,6 @@ def onset(engine: str) -> None:
     print(f"{engine:12s} plate onset: none up to {frac:.3f} dt_limit", flush=True)
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    newton_beams() if sys.argv[1:] == ["newton"] else main()

@@ -29,10 +29,32 @@ def _empty() -> Modes:
 def structure_modes(scene, n: int | None = None, residual: bool = False) -> Modes:
     """The modal data of `scene`'s target: the first `n` modes (frequency order) of a beam or plate, the `n`
     lowest of a modal target (all when n is None), nothing for a rigid plate or a second ball. `residual` adds
-    the static flexibility of the modes left out (beams, plates, truncated modal targets)."""
-    target = scene.target
+    the static flexibility of the modes left out (beams, plates, truncated modal targets).
+
+    The result depends on the (frozen) target only and is cached (read-only arrays): repeated solves of one
+    scene do not recompute modes."""
     if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0):
         raise ImpactvalError(f"n must be a whole number of modes (>= 0), got {n!r}.")
+    key = (scene.target, None if n is None else int(n), bool(residual))
+    try:
+        hit = _CACHE.get(key)
+    except TypeError:                  # a target with unhashable fields: no caching
+        return _structure_modes(scene, n, residual)
+    if hit is None:
+        hit = _structure_modes(scene, n, residual)
+        for a in (hit.omega, hit.modal_mass, hit.phi):
+            a.flags.writeable = False
+        if len(_CACHE) >= 64:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = hit
+    return hit
+
+
+_CACHE: dict = {}
+
+
+def _structure_modes(scene, n: int | None, residual: bool) -> Modes:
+    target = scene.target
     if target.kind in RIGID_KINDS:
         return _empty()
     if n == 0:      # no modes: the whole structure as its static flexibility (with `residual`)

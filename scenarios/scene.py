@@ -40,6 +40,7 @@ TOML format (public, names fixed)::
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -398,13 +399,33 @@ def catalogue_names() -> list[str]:
     return sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml"))
 
 
+_CHECKED: dict = {}
+
+
+def _all_frozen(scene) -> bool:
+    """True for a Scene whose ball, target and materials are frozen dataclasses (nothing in it can change)."""
+    parts = (scene, scene.ball, scene.target, scene.ball.material, scene.target.material)
+    if not all(dataclasses.is_dataclass(p) and type(p).__dataclass_params__.frozen for p in parts):
+        return False
+    try:
+        hash(scene)             # a list inside (e.g. a modal target's omega) could still change
+    except TypeError:
+        return False
+    return True
+
+
 def load_scene(name_or_path: str | Path) -> Scene:
     """Load a scene from a catalogue name (e.g. ``"plate_steel"``) or a TOML file path.
 
     A Scene is returned as it is, after checking its fields (Python-built scenes obey the same limits).
     """
     if hasattr(name_or_path, "ball") and hasattr(name_or_path, "target"):
-        limits.check_scene_fields(name_or_path)
+        if _CHECKED.get(id(name_or_path)) is not name_or_path:
+            limits.check_scene_fields(name_or_path)
+            if _all_frozen(name_or_path):       # immutable all the way down: checked once (repeated solves)
+                if len(_CHECKED) > 256:
+                    _CHECKED.clear()
+                _CHECKED[id(name_or_path)] = name_or_path
         return name_or_path
     if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
         raise SceneError(f"a scene is a Scene, a catalogue name (see `impactval scenes`) or a path to a .toml scene "

@@ -72,19 +72,95 @@ def test_unknown_option_is_a_one_line_error(adapter):
         adapter.check_settings(EngineSettings(contact="native", options=(("solref", 1),)))
 
 
+def test_penalty_chain_tends_to_the_rigid_chain():
+    """Independent check of the linearised penalty-joint chain (the model of the stability limit and of the give):
+    with a very stiff attachment its bending frequencies are the rigid-jointed Hencky chain's."""
+    from scipy import linalg
+
+    from impactval.engines.chain import hencky_chain
+    from impactval.engines.newton_ import penalty_chain_matrices
+
+    for name in ("beam_ss_midspan", "tests/unseen/cc_aluminium_0p3.toml", "tests/unseen/cantilever_titanium.toml"):
+        chain = hencky_chain(impactval.load_scene(name).target, 21, "section")
+        mass, k, row = penalty_chain_matrices(chain, 1e15)
+        w2, vecs = linalg.eigh(k, np.diag(mass))
+        bending = np.sqrt(w2[np.abs(row @ vecs) > 1e-9])[:6]         # modes the contact point sees
+        assert np.allclose(bending, chain.frequencies()[:6], rtol=1e-4), name
+
+
+def test_penalty_give_is_a_compliance_in_series():
+    """The give of the penalty joints is a compliance 1/attach_ke added to the chain's: small, it halves when
+    attach_ke doubles, and it softens (f_m down, t_m up)."""
+    from impactval.engines.chain import hencky_chain
+    from impactval.engines.newton_ import penalty_give
+
+    sc = impactval.load_scene("beam_ss_midspan")
+    chain = hencky_chain(sc.target, 41, "section")
+    g1, g2 = penalty_give(sc, chain, 1e10), penalty_give(sc, chain, 2e10)
+    assert g1[1] < 0 < g1[0] and g1[2] < 0
+    assert g2[1] / g1[1] == pytest.approx(0.5, rel=0.05)
+
+
 @pytest.mark.slow
-def test_beam_native_linear_within_1_5_percent(adapter):
-    """Bar: worked beam, penalty contact k0, SemiImplicit chain N = 41, dt = 1e-6, vs the linear-theory
-    reference within 1.5 % (see docs/newton.md: the penalty joints' give offsets part of the chain's
-    stiffening)."""
+def test_sizing_bounds_the_give_and_float32(adapter):
+    """SemiImplicit's sizing on the worked beam: attach_ke at the float32 cap (ke ulp(L/2) <= 0.12 v0 sqrt(k0 m),
+    <= ATTACH_KE_MAX), N with every metric's give within GIVE_TOL, the reported model_error the rigid chain's and the
+    give composed."""
+    from impactval.engines.newton_ import ATTACH_KE_MAX, FLOAT32_FORCE_FRACTION, GIVE_TOL
+    from impactval.reference.hertz import plate_impact
+
+    sc = impactval.load_scene("beam_ss_midspan")
+    d = adapter.plan(sc, adapter.check_settings(EngineSettings(contact="native"))).diagnostics
+    k0 = plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity).k0
+    f_lin = sc.ball.velocity * math.sqrt(k0 * sc.ball.mass)
+    assert d["attach_ke"] * np.spacing(np.float32(sc.target.length / 2)) <= FLOAT32_FORCE_FRACTION * f_lin * (1 + 1e-9)
+    assert d["attach_ke"] <= ATTACH_KE_MAX
+    for m in ("t_m", "f_m", "delta_m"):
+        assert abs(d[f"penalty_give_{m}"]) <= GIVE_TOL
+        assert d[f"model_error_{m}"] == pytest.approx((1 + d[f"model_error_rigid_{m}"]) * (1 + d[f"penalty_give_{m}"]) - 1)
+    assert d["segments"] > 41          # the old cap: finer now that the give is bounded
+
+
+def _native_vs_linear(adapter, name):
     from impactval.reference.linear import solve_linear
 
-    beam = impactval.load_scene("beam_ss_midspan")
-    r = adapter.run(beam, EngineSettings(dt=1e-6, contact="native"))
+    sc = impactval.load_scene(name)
+    r = adapter.run(sc, EngineSettings(dt="auto", contact="native"))
     assert r.status == "ok", r.message
-    lin = solve_linear(beam, stiffness=r.diagnostics["contact_stiffness"])
-    for got, want in ((r.t_m, lin.t_m), (r.f_m, lin.f_m), (r.delta_m, lin.delta_m)):
-        assert abs(rel(got, want)) <= 0.015
+    lin = solve_linear(sc, stiffness=r.diagnostics["contact_stiffness"])
+    return r, [rel(got, want) for got, want in ((r.t_m, lin.t_m), (r.f_m, lin.f_m), (r.delta_m, lin.delta_m))]
+
+
+@pytest.mark.slow
+def test_beam_native_linear_within_1_5_percent_for_a_reason(adapter):
+    """Bar: worked beam, penalty contact k0, SemiImplicit with its own sizing, dt auto, vs the linear-theory reference
+    within 1.5 % (measured t_m -0.14 / f_m +0.23 %, N = 79, attach_ke 5.6e9). Not a cancellation: the rigid-jointed
+    chain alone is within 1.5 % (+1.0 %), the joints' give within 0.5 % (-0.49 %), and the row lands within 0.5 % of
+    the model_error that split predicts (the rest is time integration and Hertz-vs-linear in the chain's part)."""
+    r, err = _native_vs_linear(adapter, "beam_ss_midspan")
+    assert max(abs(e) for e in err) <= 0.015
+    d = r.diagnostics
+    assert abs(d["model_error_rigid_f_m"]) <= 0.015 and abs(d["penalty_give_f_m"]) <= 0.005
+    assert abs(err[1] - d["model_error_f_m"]) <= 0.005
+    assert r.energy_error <= 0.01
+
+
+UNSEEN_OK = ["cc_aluminium_0p3", "glass_on_pmma", "stubby_steel"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", UNSEEN_OK + [pytest.param("heavy_wc_slender", marks=pytest.mark.xfail(
+    strict=True, reason="heavy slender beam: the chain needs ~150+ segments (rigid 61-segment chain +5.7 % in f_m, "
+                        "model_error 5.3 %); attach_ke cannot follow in float32 (5e9 at N = 59: energy +13 %)"))])
+def test_unseen_beams_native_within_1_5_percent(adapter, name):
+    """Unseen beams (tests/unseen), penalty contact, every default: within 1.5 % of the linear theory and within
+    0.5 % + the predicted model_error (measured f_m: cc_aluminium_0p3 -0.12 % (was -1.83 % with the 41-segment,
+    attach_ke 1e9 chain), glass_on_pmma -0.05 %, stubby_steel -0.07 %; cantilever_titanium -0.14 % in the
+    benchmark)."""
+    r, err = _native_vs_linear(adapter, f"tests/unseen/{name}.toml")
+    assert max(abs(e) for e in err) <= 0.015, err
+    assert abs(err[1]) <= abs(r.diagnostics["model_error_f_m"]) + 0.005
+    assert r.energy_error <= 0.02
 
 
 @pytest.mark.slow
@@ -136,7 +212,7 @@ def test_plate_stable_below_0_7_of_the_predicted_limit(adapter, plate_scene, fra
 @pytest.mark.slow
 def test_beam_energy_within_bound_just_under_the_limit(adapter):
     """Worked beam, penalty contact, SemiImplicit at 0.95 of the predicted limit (the linearised penalty-joint
-    chain's 2/omega_max): ok, energy within 1 % (measured 0.24 %)."""
+    chain's 2/omega_max, 9.1e-7 s at N = 79, attach_ke 5.6e9): ok, energy within 1 % (measured 0.32 %)."""
     r = _run_at(adapter, impactval.load_scene("beam_ss_midspan"), 0.95, "native")
     assert r.status == "ok", r.message
     assert r.energy_error < 0.01
@@ -145,8 +221,8 @@ def test_beam_energy_within_bound_just_under_the_limit(adapter):
 @pytest.mark.slow
 def test_beam_blows_up_just_above_the_predicted_limit(adapter):
     """The prediction is not merely conservative: stepped anyway at 1.1 of it, the energy grows past the 5 %
-    bound (measured onset between 1.02 (+2.3 %) and 1.05 (+6.9 %); the old estimate 2 sqrt(attach_ke/m) was
-    1.34x the real limit: the worked beam blew up at 0.84 of it)."""
+    bound (measured with the sized chain, N = 79: +30 % at 1.02, diverged at 1.05; the N = 41, attach_ke 1e9 chain:
+    onset between 1.02 and 1.05; the old estimate 2 sqrt(attach_ke/m) was 1.34x the real limit)."""
     beam = impactval.load_scene("beam_ss_midspan")
     lim = adapter.plan(beam, adapter.check_settings(EngineSettings(dt=1e-6, contact="native"))).dt_limit
     sim = adapter.simulate(beam, adapter.check_settings(EngineSettings(dt=float(f"{1.1 * lim:.4g}"), contact="native")))

@@ -1,0 +1,218 @@
+"""The reported uncertainty against the real error (issue 17 item 5).
+
+Honesty: on random scenes (beams of all three supports and both theories, plates, modal targets, rigid plates;
+random materials, balls 1-50 mm, 0.01-10 m/s, impact points; explicit mode counts with and without the
+residual flexibility, and the automatic mode count) the real error does not exceed the reported uncertainty; the
+few measured exceptions (explicit mode counts) are reported in docs/reference.md and guarded here by count and size.
+Real errors come from the independent ODE form (scipy DOP853, reference/ode.py) where it applies (no residual
+flexibility, few modes) and otherwise from a much tighter solve (tol 1e-12, or many more modes at 1e-11).
+Tightness: on the catalogue the reported uncertainty is within 10x of the real error where measured so (the
+scenes listed in TEN_X_MISSES do not make it; their measured ratios are in docs/reference.md).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import impactval
+from impactval.reference.hertz import plate_impact
+from impactval.reference.ode import solve_ode
+from impactval.reference.solve import solve_modes, structure_modes
+from impactval.scenarios.scene import CATALOGUE_DIR, scene_from_dict
+
+MATERIALS = ("steel", "aluminium", "titanium", "glass", "tungsten-carbide", "pmma")
+
+
+def _log_uniform(rng, lo: float, hi: float) -> float:
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+
+def random_scene(rng, kinds=("beam", "beam", "plate", "modal", "rigid-plate"), timoshenko: float = 0.3,
+                 clamped_timoshenko: bool = True):
+    """(scene, explicit mode count or None, residual) for one random case (`clamped_timoshenko=False`: Timoshenko
+    beams simply supported only, whose modes are closed-form and cheap in the thousands)."""
+    ball = {"radius": _log_uniform(rng, 1e-3, 0.05), "velocity": _log_uniform(rng, 0.01, 10.0),
+            "material": str(rng.choice(MATERIALS))}
+    kind = str(rng.choice(kinds))
+    n, residual = None, False
+    if kind == "beam":
+        support = str(rng.choice(["simply-supported", "clamped-clamped", "cantilever"]))
+        height = _log_uniform(rng, 0.005, 0.05)
+        target = {"kind": "beam", "material": str(rng.choice(MATERIALS)), "support": support,
+                  "length": height * _log_uniform(rng, 4.0, 100.0), "width": _log_uniform(rng, 0.005, 0.05),
+                  "height": height,
+                  "impact_at": float(rng.uniform(0.1, 1.0) if support == "cantilever" else rng.uniform(0.05, 0.95))}
+        if rng.random() < timoshenko:
+            target["theory"] = "timoshenko"
+            if not clamped_timoshenko:
+                target["support"], target["impact_at"] = "simply-supported", float(rng.uniform(0.05, 0.95))
+        n, residual = int(rng.choice([4, 8, 40, 160])), bool(rng.random() < 0.4)
+    elif kind == "plate":
+        target = {"kind": "plate", "material": str(rng.choice(MATERIALS)), "support": "simply-supported",
+                  "length": _log_uniform(rng, 0.1, 1.0), "width": _log_uniform(rng, 0.1, 1.0),
+                  "thickness": _log_uniform(rng, 0.003, 0.03),
+                  "impact_at": [float(rng.uniform(0.05, 0.95)), float(rng.uniform(0.05, 0.95))]}
+        n, residual = int(rng.choice([8, 24, 120])), bool(rng.random() < 0.4)
+    elif kind == "modal":
+        scene = scene_from_dict({"name": "random", "ball": ball,
+                                 "target": {"kind": "rigid-plate", "material": "steel"}})
+        p = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+        count = int(rng.integers(1, 8))
+        w = np.array([_log_uniform(rng, 0.3, 1000.0) for _ in range(count)])    # omega delta_m / v0
+        s = np.array([_log_uniform(rng, 0.01, 30.0) for _ in range(count)])     # (m0 / m) phi^2
+        phi = rng.uniform(0.2, 1.0, count)
+        target = {"kind": "modal", "material": str(rng.choice(MATERIALS)), "omega": (w * p.v0 / p.delta_m).tolist(),
+                  "modal_mass": (scene.ball.mass * phi**2 / s).tolist(), "phi": phi.tolist()}
+    else:
+        target = {"kind": "rigid-plate", "material": str(rng.choice(MATERIALS))}
+    return scene_from_dict({"name": "random", "ball": ball, "target": target}), n, residual
+
+
+def _metrics(m) -> np.ndarray:
+    return np.array([m.t_m, m.f_m, m.delta_m])
+
+
+def _check_honest(m, unc, truth, label: str) -> float:
+    """Assert |error| <= uncertainty per metric; return reported / real (max over metrics)."""
+    x, u, tr = _metrics(m), _metrics(unc), _metrics(truth)
+    err = np.abs(x - tr)
+    assert np.all(err <= u), f"{label}: errors {err / tr} above the reported {u / x}"
+    return float(np.max(u / x) / max(np.max(err / tr), 1e-16))
+
+
+def _modes_case(seed: int):
+    scene, n, residual = random_scene(np.random.default_rng(seed))
+    md = structure_modes(scene, n, residual=residual) if n is not None else structure_modes(scene)
+    return scene, md, n, residual
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_uncertainty_bounds_the_ode_form_on_random_scenes(seed):
+    """Fast subset: random scenes of at most 8 modes without residual flexibility against DOP853 at rtol 1e-13."""
+    rng = np.random.default_rng(1000 + seed)
+    scene, n, _ = random_scene(rng)
+    n = None if n is None else min(n, 8)
+    md = structure_modes(scene, n) if n is not None else structure_modes(scene)
+    m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+    truth, _ = solve_ode(md, m0, alpha, v0, rtol=1e-13, atol=1e-15)
+    for tol in (1e-5, 1e-7):
+        run, unc = solve_modes(md, m0, alpha, v0, tol)
+        _check_honest(run.metrics, unc, truth, f"seed {1000 + seed}, {scene.target.kind}, tol {tol:g}")
+        assert max(_metrics(unc) / _metrics(run.metrics)) <= tol
+
+
+@pytest.mark.parametrize("seeds,max_misses,worst", [
+    (range(150), 2, 1.25),
+    pytest.param(range(150, 650), 3, 1.7, marks=pytest.mark.slow)], ids=["150-scenes", "500-scenes"])
+def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds, max_misses, worst):
+    """Random scenes (up to 160 modes, with and without residual flexibility) at tol 1e-4, 1e-6, 1e-8 against the
+    same model at tol 1e-12. Measured misses (docs/reference.md), reported as misses and guarded here against
+    regressions: seeds 0-149 (437 comparisons): 2, 1.17x and 1.21x, modal targets with strongly coupled light
+    modes (s > 3, beyond the single-mode calibration of the unresolved-mode table) at tol 1e-8; seeds 150-649
+    (1464 comparisons): 3, at most 1.69x (8-mode plate + residual at tol 1e-4, pre-asymptotic step ratio).
+    The median of reported / real is below 10 (6.6 measured)."""
+    ratios, misses = [], []
+    for seed in seeds:
+        scene, md, n, residual = _modes_case(seed)
+        m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+        try:
+            truth, truth_unc = solve_modes(md, m0, alpha, v0, 1e-12)
+        except impactval.ImpactvalError:      # refused: a structure far softer than the contact
+            continue
+        for tol in (1e-4, 1e-6, 1e-8):
+            run, unc = solve_modes(md, m0, alpha, v0, tol)
+            x, u, tr = _metrics(run.metrics), _metrics(unc), _metrics(truth.metrics)
+            err = np.abs(x - tr)
+            if np.max(err / tr) < 100 * max(_metrics(truth_unc) / tr):
+                continue          # the real error is at the truth's own level: nothing to compare
+            if np.any(err > u):
+                misses.append((float(np.max(err / u)), seed, scene.target.kind, n, residual, tol))
+            ratios.append(float(np.max(u / x) / np.max(err / tr)))
+    assert len(ratios) > 2.5 * len(seeds)
+    assert len(misses) <= max_misses and max([m[0] for m in misses], default=0.0) <= worst, misses
+    assert np.median(ratios) < 10.0
+
+
+def _truth_auto(scene, modes_used: int):
+    """The scene with 8x the modes (32x for Timoshenko: its truncation error falls only ~2.5x per doubling) and
+    their residual flexibility, tol 1e-11: independent of the mode-count estimate under test."""
+    mult = 32 if getattr(scene.target, "theory", "") == "timoshenko" else 8
+    try:
+        md = structure_modes(scene, mult * modes_used, residual=True)
+        return solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-11)[0].metrics
+    except impactval.ImpactvalError:    # over the node budget (a heavy ball): 8x the modes (Timoshenko: e/24 at worst)
+        md = structure_modes(scene, 8 * modes_used, residual=True)
+        return solve_modes(md, scene.ball.mass, scene.alpha, scene.ball.velocity, 1e-10)[0].metrics
+
+
+@pytest.mark.slow
+def test_automatic_mode_count_is_honest_on_random_beams():
+    """Random beams (both theories) with the automatic mode count: time step + truncation bound the real error."""
+    for seed in range(25):
+        scene, _, _ = random_scene(np.random.default_rng(5000 + seed), kinds=("beam",), clamped_timoshenko=False)
+        for tol in (1e-4, 1e-6):
+            try:
+                r = impactval.solve(scene, tol=tol)
+                truth = _truth_auto(scene, r.modes)
+            except impactval.ImpactvalError:      # refused: a structure far softer than the contact
+                continue
+            _check_honest(r.metrics, r.uncertainty, truth, f"seed {5000 + seed}, tol {tol:g}")
+
+
+def test_residual_flexibility_does_not_blur_the_end_of_contact():
+    """A soft plate with a large residual flexibility (found by the random check): the contact end was located on
+    delta = gap - R alpha delta^1.5, which is not smooth there, and t_m carried an error of order (smallest
+    step)^1.5 that the estimate missed (8.8e-10 at tol 1e-8, reported 1.9e-10). Located on the gap it converges."""
+    scene = scene_from_dict({
+        "name": "soft_plate", "ball": {"radius": 0.013641643, "velocity": 0.45085453, "material": "glass"},
+        "target": {"kind": "plate", "material": "pmma", "support": "simply-supported", "length": 0.23198387,
+                   "width": 0.18917100, "thickness": 0.0066614698, "impact_at": [0.38299437, 0.51878908]}})
+    md = structure_modes(scene, 24, residual=True)
+    assert md.residual_flexibility > 1e-7
+    m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+    truth, _ = solve_modes(md, m0, alpha, v0, 1e-12)
+    for tol in (1e-6, 1e-8):
+        run, unc = solve_modes(md, m0, alpha, v0, tol)
+        _check_honest(run.metrics, unc, truth.metrics, f"tol {tol:g}")
+
+
+#: catalogue and tests' scenes whose reported uncertainty at tol 1e-6 is more than 10x the real error (measured
+#: ratio x 1.5; docs/reference.md): automatic-mode beams, where the unresolved-mode bound (a sum of per-mode worst
+#: cases) dominates, and the stubby Timoshenko beam, whose truncation ratio is trusted to 2x per doubling only.
+#: Asserted honest and not looser than this.
+TEN_X_MISSES = {"beam_cantilever_tip": 20, "beam_ss_stubby_timoshenko": 110, "heavy_ball_slender_beam": 60,
+                "cantilever_titanium": 26, "cc_aluminium_0p3": 24, "heavy_wc_slender": 26, "stubby_steel": 21,
+                "rand_wc_on_steel_cantilever": 50, "stubby_steel_timoshenko": 18, "heavy_wc_slender_timoshenko": 260,
+                "al_cantilever_glass": 37, "steel_cc_pmma_ball": 46, "ti_ss_steel_heavy": 40}
+#: measured within 10x at tol 1e-6 (catalogue scenes added later are held to 10x too; scenes added to tests/unseen
+#: later are checked for honesty only until measured and listed here or above)
+WITHIN_10X = ("rand_glass_on_pmma_ss", "rand_wc_on_pmma_cc", "glass_on_pmma")
+_TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
+_SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
+    [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]
+
+
+_SLOW_TRUTH = ("plate_ss_rectangular", "heavy_wc_slender_timoshenko")      # truth with thousands of modes: 3-46 s
+
+
+def _stem(name: str) -> str:
+    return name.rsplit("/", 1)[-1].removesuffix(".toml")
+
+
+@pytest.mark.parametrize("name", [pytest.param(s, marks=pytest.mark.slow) if _stem(s) in _SLOW_TRUTH else s
+                                  for s in _SCENES], ids=_stem)
+def test_catalogue_uncertainty_is_within_10x_of_the_real_error(name):
+    scene = impactval.load_scene(name)
+    r = impactval.solve(scene, tol=1e-6)
+    kind = scene.target.kind
+    if kind in ("beam", "plate") and getattr(scene.target, "modes", None) is None:
+        truth = _truth_auto(scene, r.modes)
+    elif kind == "rigid-plate":
+        truth = plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity)
+    else:
+        truth = impactval.solve(scene, tol=1e-12).metrics
+    ratio = _check_honest(r.metrics, r.uncertainty, truth, name)
+    stem = _stem(name)
+    if "/" in name and stem not in TEN_X_MISSES and stem not in WITHIN_10X:
+        return                 # a tests/unseen scene not measured yet: honesty only (above)
+    assert ratio <= TEN_X_MISSES.get(stem, 10.0), f"{stem}: reported / real = {ratio:.1f}"
