@@ -62,6 +62,11 @@ ATTACH_KE_MAX = 6e9
 #: largest relative change of t_m / f_m / delta_m the penalty joints' give may cause (penalty chain vs the
 #: rigid-jointed chain, exact linear theory on both): N is lowered until the give is within it
 GIVE_TOL = 5e-3
+#: an `auto` attach_ke run whose energy check fails (float32 growth; never a dt above the predicted limit) is
+#: retried with attach_ke times this (N re-sized for the give at the softer ke, as the auto rule does) ...
+ATTACH_KE_RETRY_FACTOR = 0.5
+#: ... at most this many times; an explicit `--option newton.attach_ke=X` is never retried
+ATTACH_KE_RETRIES = 3
 #: the attach_ke used before (default until this sizing; kept for reference in docs/tests)
 ATTACH_KE = 1e9
 #: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
@@ -128,11 +133,53 @@ class NewtonAdapter(EngineAdapter):
                 n = segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS)).n
         return hencky_chain(scene.target, n, rotary)
 
-    @staticmethod
-    def attach_ke(scene, settings: EngineSettings) -> float:
-        """SemiImplicit's joint_attach_ke [N/m]: the option, or 'auto' = attach_ke_for(scene)."""
+    #: scale on the automatic attach_ke while `run` retries a float32-unstable job (1 otherwise)
+    _attach_ke_scale: float = 1.0
+
+    def attach_ke(self, scene, settings: EngineSettings) -> float:
+        """SemiImplicit's joint_attach_ke [N/m]: the option, or 'auto' = attach_ke_for(scene) (times the
+        retry scale while `run` retries)."""
         ke = settings.option("attach_ke", "auto")
-        return attach_ke_for(scene) if ke == "auto" else float(ke)
+        return attach_ke_for(scene) * self._attach_ke_scale if ke == "auto" else float(ke)
+
+    def run(self, scene, settings: EngineSettings):
+        """The base run; then, for SemiImplicit on a beam with attach_ke 'auto' whose energy check failed
+        (float32 rounding of the stiff penalty joints pumps energy, independent of dt), up to ATTACH_KE_RETRIES
+        reruns at attach_ke * ATTACH_KE_RETRY_FACTOR^i (N re-sized for the give). The row is the first ok
+        attempt (or the last one), with diagnostics attach_ke_tried / attach_ke_retries and a validity note."""
+        from dataclasses import replace
+
+        from impactval.reference.result import Status
+
+        result = super().run(scene, settings)
+        if not self._retry_wanted(scene, settings, result):
+            return result
+        tried = [result.diagnostics.get("attach_ke", math.nan)]
+        first = result.message
+        for i in range(1, ATTACH_KE_RETRIES + 1):
+            self._attach_ke_scale = ATTACH_KE_RETRY_FACTOR ** i
+            try:
+                result = super().run(scene, settings)
+            finally:
+                self._attach_ke_scale = 1.0
+            tried.append(result.diagnostics.get("attach_ke", math.nan))
+            if result.status == Status.OK or not _energy_failure(result):
+                break
+        ok = result.status == Status.OK
+        note = (f"newton: automatic attach_ke {tried[0]:.3g} N/m failed the energy check ({first}); "
+                + (f"retried {len(tried) - 1}x, {'ok' if ok else 'still ' + str(result.status.value)} at "
+                   f"attach_ke {tried[-1]:.3g} N/m, N = {result.diagnostics.get('segments')}, model_error "
+                   f"{100 * result.model_error:.2g} %"))
+        diag = {**result.diagnostics, "attach_ke_tried": [float(k) for k in tried],
+                "attach_ke_retries": len(tried) - 1, "attach_ke_first_failure": first}
+        return replace(result, diagnostics=diag, validity=(*result.validity, note))
+
+    def _retry_wanted(self, scene, settings: EngineSettings, result) -> bool:
+        if scene.target.kind != "beam" or not _energy_failure(result):
+            return False
+        parsed = self.check_settings(settings)
+        return ((parsed.integrator or INTEGRATORS[0]) == "semi-implicit"
+                and parsed.option("attach_ke", "auto") == "auto")
 
     def explicit(self, settings: EngineSettings) -> bool:
         return (settings.integrator or INTEGRATORS[0]) != "xpbd"
@@ -410,6 +457,13 @@ class NewtonAdapter(EngineAdapter):
             if lay.get("attach_ke"):
                 pe += 0.5 * lay["attach_ke"] * _joint_gaps_squared(chain, lay)
         return pe + ke
+
+
+def _energy_failure(result) -> bool:
+    """True for an `unstable` row from the energy check (not a dt above the limit, NaN or a crash)."""
+    from impactval.reference.result import Status
+
+    return result.status == Status.UNSTABLE and result.message.startswith("energy grew")
 
 
 def _plate_delta_m(scene) -> float:
