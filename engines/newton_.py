@@ -12,7 +12,9 @@ Model (SI, z up, no gravity, no friction, no damping: `angular_damping = 0`, con
   stiffness EI/l, 2EI/l at a clamp), a box shape on the hit segment only, the origin at the beam's middle
   (float32 positions |x| <= L/2). SemiImplicit: attach_ke at the float32 cap (`attach_ke_for`) and N from the
   shared sizing lowered until the penalty joints' give is within GIVE_TOL (`penalty_segments`); model_error =
-  the rigid chain's composed with that give (`penalty_give`). Other integrators: the shared sizing capped at
+  the rigid chain's composed with that give (`penalty_give`). An automatic attach_ke whose run fails the energy
+  check (float32 growth) is retried at half, N re-sized, up to ATTACH_KE_RETRIES times (`run`; an explicit
+  option never is); the row records attach_ke_tried / attach_ke_retries and a validity note. Other integrators: the shared sizing capped at
   MAX_SEGMENTS = 41. Supports: simply
   supported = revolute joints to the world at x = 0 and x = L (the second closes a loop:
   SemiImplicit's penalty joints give the axial freedom a roller would); clamped ends add 2EI/l;
