@@ -111,11 +111,11 @@ def _bare_region(engine: str, run, n_steps: int):
 
 def _timed_region(adapter, run, n_steps: int):
     def region():
-        step, clock, model = adapter.step, time.perf_counter, run
+        step, clock = adapter.stepper(run), time.perf_counter
         step_s = 0.0
         for _ in range(n_steps):            # the base loop's timed statements
             ts = clock()
-            step(model)
+            step()
             step_s += clock() - ts
     return region
 

@@ -44,6 +44,7 @@ takes over). Third-party adapters: an entry point in the group `impactval.engine
 """
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import math
@@ -51,6 +52,7 @@ import multiprocessing as mp
 import signal
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -428,6 +430,12 @@ class SteppingAdapter(EngineAdapter):
     def build(self, scene, settings: EngineSettings) -> Any:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def stepper(self, model: Any) -> Callable[[], None]:
+        """A zero-argument callable that advances `model` by one step: what the base loop times. Default:
+        `step` bound to the model; an adapter may return its engine's own step call (one Python frame
+        less per step: benchmarks/bench_sweep_overhead.py counts it). Must do exactly what `step` does."""
+        return functools.partial(self.step, model)
+
     def step(self, model: Any) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -481,14 +489,14 @@ class SteppingAdapter(EngineAdapter):
             # attribute and global lookups, one tuple per step, the sample time rebuilt from k afterwards
             cols: list[tuple[float, ...]] = []
             append = cols.append
-            step, contact, energy, kin, observe = self.step, self.contact, self.energy, self.kinematics, self.observe
+            step, contact, energy, kin, observe = self.stepper(model), self.contact, self.energy, self.kinematics, self.observe
             clock, isfinite = time.perf_counter, math.isfinite
             lag = self.sample_lag
 
             step_s, k = 0.0, 0
             if lag:                # the first step's report describes the initial state
                 ts = clock()
-                step(model)
+                step()
                 step_s += clock() - ts
                 k = 1
             k_first = k
@@ -500,7 +508,7 @@ class SteppingAdapter(EngineAdapter):
             touched, ended, stop = False, False, ""
             while k < n_max:
                 ts = clock()
-                step(model)
+                step()
                 step_s += clock() - ts
                 k += 1
                 observe(model)
