@@ -243,14 +243,17 @@ def _stability_sentence(r) -> str:
 
 # ---------------------------------------------------------------------------- plots
 def _pyplot():
-    try:
-        import matplotlib
+    from impactval.reports.plots import _pyplot as pyplot      # one Agg/ImportError rule for all plots
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return None
-    return plt
+    return pyplot()
+
+
+def _under_lines(ax, unders) -> None:
+    """A dashed horizontal line per --under tolerance, labelled in % at the right edge."""
+    for under in unders:
+        ax.axhline(100 * under, color="0.35", ls="--", lw=1)
+        ax.annotate(f"{100 * under:g} %", xy=(1.0, 100 * under), xycoords=("axes fraction", "data"),
+                    xytext=(3, 0), textcoords="offset points", va="center", fontsize=8, color="0.25")
 
 
 def _log_axes(ax, xlabel: str, ylabel: str) -> None:
@@ -331,10 +334,7 @@ def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) 
         failed = g[g["score"].isna() & ~g["status"].astype(str).isin(["skipped", "not-installed"])]
         _failed_band(ax, failed.assign(cost_s=failed["cost_s"].where(failed["cost_s"] > 0)), "cost_s", engine_colour,
                      done)
-        for under in unders:
-            ax.axhline(100 * under, color="0.35", ls="--", lw=1)
-            ax.annotate(f"{100 * under:g} %", xy=(1.0, 100 * under), xycoords=("axes fraction", "data"),
-                        xytext=(3, 0), textcoords="offset points", va="center", fontsize=8, color="0.25")
+        _under_lines(ax, unders)
         ax.set_xscale("log")
         ax.set_yscale("log")
         _log_axes(ax, "cost: stepping wall time [s]", "largest |error| [%]")
@@ -396,10 +396,7 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
                               f"{'' if best['clean'] else ' (envelope)'}")
         failed = g[g["score"].isna() & ~g["status"].astype(str).isin(["skipped", "not-installed"])]
         _failed_band(ax, failed, "dt", engine_colour, done)
-        for under in unders:
-            ax.axhline(100 * under, color="0.35", ls="--", lw=1)
-            ax.annotate(f"{100 * under:g} %", xy=(1.0, 100 * under), xycoords=("axes fraction", "data"),
-                        xytext=(3, 0), textcoords="offset points", va="center", fontsize=8, color="0.25")
+        _under_lines(ax, unders)
         ax.set_xscale("log")
         ax.set_yscale("log")
         _log_axes(ax, "time step dt [s]", "|error| [%]")
