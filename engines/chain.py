@@ -173,6 +173,23 @@ def model_error(scene, chain: HenckyChain) -> ChainModelError:
     return ChainModelError(m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0)
 
 
+def chain_notes(scene, chain: HenckyChain, me: ChainModelError, tol: float, capped_at: int | None = None) -> list[str]:
+    """Validity notes of a chain row (shown with the row in the report): a Hencky chain discretises
+    Euler-Bernoulli theory, so on a Timoshenko scene its `model_error` holds the beam-theory difference; and,
+    with `capped_at` (the engine's most links), a chain whose own Euler-Bernoulli error stays above `tol`."""
+    notes = []
+    eb = euler_bernoulli(scene)
+    own = me if eb is scene else model_error(eb, chain)
+    if eb is not scene and me.largest > tol:
+        notes.append(f"Euler-Bernoulli chain on a Timoshenko scene: its model error {100 * me.largest:.2f} % is the "
+                     f"beam-theory difference (the chain itself is {100 * own.largest:.2f} % off Euler-Bernoulli); "
+                     "compare it on theory = \"euler-bernoulli\" or use exudyn (solid beam, shear-deformable)")
+    if capped_at is not None and own.largest > tol and chain.n >= capped_at - 12:
+        notes.append(f"chain capped at {chain.n} links (the engine's most links: {capped_at}): its own "
+                     f"Euler-Bernoulli model error is {100 * own.largest:.2f} %, above chain_tol {100 * tol:g} %")
+    return notes
+
+
 def continuum_frequencies(beam, n: int) -> np.ndarray:
     from impactval.reference.beams import beam_frequencies
 

@@ -71,7 +71,8 @@ from typing import Any
 import numpy as np
 
 from impactval.engines.base import EngineSettings, Plan, SteppingAdapter, plate_times
-from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
+from impactval.engines.chain import (DEFAULT_CHAIN_TOL, HenckyChain, centring, chain_notes, hencky_chain, omega_max,
+                                     segments_for)
 from impactval.engines.options import in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
 
@@ -244,10 +245,11 @@ class PybulletAdapter(SteppingAdapter):
             me = model_error(scene, chain)
             err = me.largest
             diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m)
-            sized = _sized(scene, float(settings.option("chain_tol", DEFAULT_CHAIN_TOL)))
-            if settings.segments is None and sized.model_error.largest > settings.option("chain_tol", DEFAULT_CHAIN_TOL):
-                diag["validity"] = (f"chain capped at {chain.n} links (PyBullet, MAX_SIZED_LINKS): its own model error is "
-                                    f"{100 * me.largest:.2f} %, above chain_tol")
+            tol = float(settings.option("chain_tol", DEFAULT_CHAIN_TOL))
+            notes = chain_notes(scene, chain, me, tol,
+                                min(most_links(scene.target), MAX_SIZED_LINKS) if settings.segments is None else None)
+            if notes:
+                diag["validity"] = notes
         return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag)
 
     # ------------------------------------------------------------------ the job

@@ -230,7 +230,47 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
             le = relative_errors(res, lin)
             row.update(lin_err_t_m=le["t_m"], lin_err_f_m=le["f_m"], lin_err_delta_m=le["delta_m"],
                        lin_err_curve=curve_error(res, lin))
+    if res.success:
+        lin_err = {m: _num(row.get(f"lin_err_{m}")) for m in METRICS}
+        notes = row_notes(res, err if hertz else lin_err, structure, hertz or any(map(math.isfinite, lin_err.values())),
+                          against="the Hertz reference" if hertz else "the linear theory")
+        if notes:
+            row["message"] = "; ".join(notes)
     return row
+
+
+#: an error this much larger than the model's own estimate (fraction of the reference) needs a note
+UNEXPLAINED_ERROR = 5e-3
+
+
+def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, float], check: bool,
+              against: str = "the Hertz reference") -> list[str]:
+    """Validity notes of a row with a result (its `message`, shown with the row): the result's `validity`, the
+    adapter's `diagnostics["validity"]` (a string or a list), and, when `check`, every metric whose error `err`
+    (against the Hertz reference, or the linear theory for a linear law) exceeds the model's own estimate
+    (`structure_err`, else `model_error`) by more than UNEXPLAINED_ERROR: such an error is not the structure
+    model's, so it is the time step, the integrator or the engine (never silent)."""
+    notes = [str(v) for v in (res.validity or ())]
+    extra = (res.diagnostics or {}).get("validity")
+    notes += [extra] if isinstance(extra, str) else [str(v) for v in (extra or ())]
+    if check:
+        me = _num(res.model_error)
+        worst = []
+        signed = against == "the Hertz reference"     # structure_err is measured with the Hertz law
+        for m in METRICS:
+            if math.isfinite(structure[m]):
+                excess = abs(err[m] - structure[m]) if signed else abs(err[m]) - abs(structure[m])
+            else:
+                excess = abs(err[m]) - (abs(me) if math.isfinite(me) else 0.0)
+            if math.isfinite(excess) and excess > UNEXPLAINED_ERROR:
+                worst.append(f"{m} {100 * err[m]:+.2f} %")
+        if worst:
+            est = ("its model's own estimate" if any(math.isfinite(v) for v in structure.values())
+                   else f"its model error {100 * me:.2f} %" if math.isfinite(me) else "a model error of 0 (none reported)")
+            notes.append(f"error against {against} beyond {est} by more than {100 * UNEXPLAINED_ERROR:g} % "
+                         f"({', '.join(worst)}): the time "
+                         f"step (dt = {_num(res.dt):.3g} s), the integrator or the engine; try a smaller --dt")
+    return list(dict.fromkeys(n for n in notes if n))
 
 
 def _contact_stiffness(res: ImpactResult) -> float:

@@ -107,15 +107,38 @@ def table_rows(df: pd.DataFrame, marks: Mapping[tuple, str] | None = None,
     return header, cells, right
 
 
+def _noted(df: pd.DataFrame) -> list[tuple[str, str, str]]:
+    """(scene, engine, note) of the rows with a result whose message holds validity notes (runner.row_notes)."""
+    if "message" not in df or "status" not in df:
+        return []
+    out = []
+    for _, r in df.iterrows():
+        msg = r["message"]
+        if str(r["status"]) == "ok" and isinstance(msg, str) and msg.strip():
+            out.append((str(r["scene"]), str(r["engine"]), " ".join(msg.split())))
+    return out
+
+
+def notes_section(df: pd.DataFrame) -> list[str]:
+    """'Notes on rows with a result': each ok row's validity notes (why its error may exceed the bar)."""
+    noted = _noted(df)
+    if not noted:
+        return []
+    return ["## Notes on rows with a result", "",
+            *(f"- {scene} / {engine}: {note}" for scene, engine, note in noted), ""]
+
+
 def text_table(df: pd.DataFrame) -> str:
-    """The results table as aligned plain text (empty columns dropped)."""
+    """The results table as aligned plain text (empty columns dropped), then a `! scene / engine: note` line
+    per row with a result that carries validity notes."""
     header, cells, right = table_rows(df)
     widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(header)]
 
     def line(items):
         return "  ".join(x.rjust(w) if r else x.ljust(w) for x, w, r in zip(items, widths, right)).rstrip()
 
-    return "\n".join([line(header), *(line(c) for c in cells)])
+    notes = [f"  ! {scene} / {engine}: {note}" for scene, engine, note in _noted(df)]
+    return "\n".join([line(header), *(line(c) for c in cells), *notes])
 
 
 def _md_table(header: list[str], cells: Iterable[list[str]], right: list[bool] | None = None) -> list[str]:
@@ -332,6 +355,7 @@ def markdown_report(df: pd.DataFrame, settings=None, *, info: Mapping[str, Any] 
     out += error_source_section(df)
     if references is not None and len(references):
         out += reference_section(references)
+    out += notes_section(df)
     bad = df[df["status"].astype(str) != "ok"]
     if len(bad):
         out += ["## Rows without a result", ""]
