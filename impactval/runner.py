@@ -348,8 +348,11 @@ class _References:
 
 
 #: loosest tolerance the other theory's reference is solved to: the gap is a percent-level quantity, and a
-#: sweep's tol 1e-9 made a clamped Timoshenko solve take ~8 min before any engine job ran
-THEORY_GAP_TOL = 1e-6
+#: sweep's tol 1e-9 made a clamped Timoshenko solve take ~8 min before any engine job ran; at 1e-6 the automatic
+#: mode count of a slender Timoshenko cantilever (tests/unseen2/cantilever_ti_long_slender, L/h = 250) doubled past
+#: 1024 modes for > 10 min (the run's progress stalled) and returned t_m +14914 %, f_m -99.3 %; at 1e-5 it stops at
+#: 1024 modes in ~12 s with t_m +0.59 %, f_m -1.11 % (explicit 256/512 modes: f_m -0.91/-0.99 %)
+THEORY_GAP_TOL = 1e-5
 
 
 def theory_gap(scene, ref: ImpactResult, tol: float) -> TheoryGap:
