@@ -95,7 +95,7 @@ class ModeChoice:
                              "kept": np.arange(1, n + 1) <= self.count})
 
 
-def _all_modes(scene) -> tuple[Modes, float]:
+def _all_modes(scene, max_modes: int = 8192) -> tuple[Modes, float]:
     """The scene's modes in frequency order up to w = W_TABLE (at least all listed ones for a
     modal target), and k0 times the static flexibility of every mode beyond them."""
     from impactval.reference.solve import structure_modes
@@ -110,7 +110,7 @@ def _all_modes(scene) -> tuple[Modes, float]:
     n = 8
     while True:
         md = structure_modes(scene, n)
-        if md.omega[-1] * plate.delta_m / v0 > W_TABLE or n >= 8192:
+        if md.omega[-1] * plate.delta_m / v0 > W_TABLE or n >= max_modes:
             break
         n *= 2
     keep = max(int(np.searchsorted(md.omega * plate.delta_m / v0, W_TABLE, side="right")), 1)
@@ -118,7 +118,7 @@ def _all_modes(scene) -> tuple[Modes, float]:
     return md, md.residual_flexibility * plate.k0
 
 
-def required_modes(scene, tol: float = 1e-3) -> ModeChoice:
+def required_modes(scene, tol: float = 1e-3, max_modes: int = 8192) -> ModeChoice:
     """The fewest modes `scene` needs for relative tolerance `tol` on t_m, f_m, delta_m (see module doc).
 
     Parameters
@@ -136,7 +136,7 @@ def required_modes(scene, tol: float = 1e-3) -> ModeChoice:
     if scene.target.kind == "rigid-plate":
         z = np.zeros(0)
         return ModeChoice(scene.name, tol, 0, 0, 0.0, 0.0, True, Metrics(0.0, 0.0, 0.0), z, z, z, z, z, 0.0)
-    md, rho_rest = _all_modes(scene)
+    md, rho_rest = _all_modes(scene, max_modes)   # max_modes: table size (beyond: static, counts extrapolated)
     mw = mode_weights(Modes(md.omega, md.modal_mass, md.phi, 0.0), mass, alpha, v0)
     th_inf, mh_inf = hertz_static_weights()
     s, w = mw.s, mw.w
@@ -179,6 +179,8 @@ def required_modes(scene, tol: float = 1e-3) -> ModeChoice:
             return 0.0
         if n <= n_all:
             return float(om_all[n - 1])
+        if n_all >= max_modes:
+            return math.nan          # beyond a capped table (engines asking for a count only)
         from impactval.reference.solve import structure_modes
 
         return float(structure_modes(scene, n).omega[-1])
