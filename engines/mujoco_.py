@@ -427,6 +427,8 @@ class MujocoAdapter(SteppingAdapter):
     module = "mujoco"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    integrator_methods = {"Euler": "symplectic-euler", "implicitfast": "symplectic-euler-implicit-damping",
+                          "RK4": "rk4"}
     min_segments = 2
     Options = MujocoOptions
     sample_lag = 1          # after mj_step, positions-derived data describe the step's start (see step)
