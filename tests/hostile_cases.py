@@ -1,6 +1,6 @@
-"""Scene files of the hostile-input checks, shared by tests/test_hostile.py (Hypothesis and the named
-refusals) and benchmarks/hostile_inputs.py (every case in its own process): one good scene per
-target kind, each case changes one thing. Units: m, m/s, rad/s, kg."""
+"""The hostile-input tables, one copy for the tests and benchmarks/hostile_inputs.py (every case in its own
+process): one good scene per target kind (each case changes one thing; units m, m/s, rad/s, kg), the bad
+range texts (tests/test_ranges.py, tests/test_sweep.py) and the Python API calls (tests/test_hostile.py)."""
 
 PLATE = """\
 name = "x"
