@@ -74,6 +74,10 @@ def test_chain_on_a_timoshenko_scene_carries_its_note():
     assert "capped" not in row["message"]
     table = text_table(pd.DataFrame([row]))
     assert "! cc_soft_polymer_timoshenko / mujoco: Euler-Bernoulli chain" in table
+    from impactval.runner import markdown_report
+
+    md = markdown_report(pd.DataFrame([row]))
+    assert "## Notes on rows with a result" in md and "- cc_soft_polymer_timoshenko / mujoco: Euler-Bernoulli" in md
 
 
 def test_pybullet_notes_name_the_real_reason():
