@@ -156,6 +156,49 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew) -> float:
+    """Propagate every mode over one step, force polynomial of degree 5 (the scheme's p = 5), in one sweep
+    the compiler vectorises: y_i <- e^{i omega_i eta} y_i + sum_l K_{l,i} coef_l (er, ei [mode]: the step's
+    e^{i omega eta}; kr, ki [l, mode]: its moment tables [m/N], all at table level jt; coef [N]: monomial coefficients of the force
+    on the step). Returns sum_i ew_i |y_i|^2 (twice the modal energy [J])."""
+    c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
+    emod = 0.0
+    for i in range(yr.shape[0]):
+        y_r = yr[i]
+        y_i = yi[i]
+        er = Er[jt, i]
+        ei = Ei[jt, i]
+        a = (er * y_r - ei * y_i + Kr[jt, 0, i] * c0 + Kr[jt, 1, i] * c1 + Kr[jt, 2, i] * c2 + Kr[jt, 3, i] * c3
+             + Kr[jt, 4, i] * c4 + Kr[jt, 5, i] * c5)
+        b = (er * y_i + ei * y_r + Ki[jt, 0, i] * c0 + Ki[jt, 1, i] * c1 + Ki[jt, 2, i] * c2 + Ki[jt, 3, i] * c3
+             + Ki[jt, 4, i] * c4 + Ki[jt, 5, i] * c5)
+        yr[i] = a
+        yi[i] = b
+        emod += ew[i] * (a * a + b * b)
+    return emod
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m) -> float:
+    """`_sweep6` for any degree m (coef[0..m])."""
+    n = yr.shape[0]
+    for i in range(n):
+        a = Er[jt, i] * yr[i] - Ei[jt, i] * yi[i]
+        b = Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
+        yr[i] = a
+        yi[i] = b
+    for l in range(m + 1):
+        cl = coef[l]
+        for i in range(n):
+            yr[i] += Kr[jt, l, i] * cl
+            yi[i] += Ki[jt, l, i] * cl
+    emod = 0.0
+    for i in range(n):
+        emod += ew[i] * (yr[i] * yr[i] + yi[i] * yi[i])
+    return emod
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0, omega=None,
         sample_dt=0.0):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
@@ -175,8 +218,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     gam = (p - 0.5) / (p + 1.0)
     yr = np.zeros(n)
     yi = np.zeros(n)
-    pr = np.zeros(n)
-    pi_ = np.zeros(n)
     ta = np.empty(max_nodes)
     da = np.empty(max_nodes)
     fa = np.empty(max_nodes)
@@ -190,8 +231,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     Pw = np.empty(p + 2)
     a_known = np.empty(p + 1)
     c = np.empty(p + 1)
-    Kcr = np.empty(n)
-    Kci = np.empty(n)
+    coef = np.zeros(p + 1)            # the step's force polynomial, new node included
     inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
     inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
     for l in range(p + 1):
@@ -199,8 +239,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         inv2[l] = 1.0 / ((l + 1) * (l + 2))
     cu = 0.0
     cx = 0.0
-    cs = 0.0
-    Kc_j = -1
     m_prev = -1
 
     t = 0.0
@@ -221,8 +259,13 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     j_prev = J
     t_end = -1.0
     etas = np.empty(J + 1)
+    inv_etas = np.empty(J + 1)
+    thr = np.empty(J + 1)
     for q in range(J + 1):
         etas[q] = H / 2.0**q
+        inv_etas[q] = 2.0**q / H
+        thr[q] = T_w * 2.0 ** (-q / gam)
+    inv_m0 = 1.0 / m0
     while True:
         if count >= max_nodes:
             return STATUS_OUT_OF_NODES, count, ta, da, fa, xa, ua, ea, flags
@@ -280,24 +323,22 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
         # ---------------------------------------------------------------- choose the step
         if in_contact:
-            h_allow = H
-            tau_s = t - ta[seg_start]
-            if tau_s < T_w:
-                h_allow = H * (tau_s / T_w) ** gam
+            # graded step eta <= H (tau / T_w)^gam towards both ends: level j is allowed where tau >= thr[j] =
+            # T_w 2^(-j / gam) (the same rule without a power per step)
+            tau = t - ta[seg_start]
             if count - seg_start >= 3 and delta > 0.0:
-                # predicted time to separation from a quadratic through the last three nodes
+                # predicted time to separation delta / (-delta') from the quadratic through the last three nodes
                 t0, t1, t2 = ta[count - 3], ta[count - 2], ta[count - 1]
                 d0, d1, d2 = da[count - 3], da[count - 2], da[count - 1]
-                dd = (d0 * (t2 - t1) / ((t0 - t1) * (t0 - t2)) + d1 * (t2 - t0) / ((t1 - t0) * (t1 - t2))
-                      + d2 * (2 * t2 - t0 - t1) / ((t2 - t0) * (t2 - t1)))
-                if dd < 0.0:
-                    tau_e = delta / (-dd)
-                    if tau_e < T_w:
-                        h2 = H * (tau_e / T_w) ** gam
-                        if h2 < h_allow:
-                            h_allow = h2
+                h1 = t1 - t0
+                h2 = t2 - t1
+                num = d2 * h1 * (2.0 * h2 + h1) - d1 * (h1 + h2) * (h1 + h2) + d0 * h2 * h2    # delta' h1 h2 (h1 + h2)
+                if num < 0.0:
+                    tau_e = delta * (h1 * h2 * (h1 + h2)) / (-num)
+                    if tau_e < tau:
+                        tau = tau_e
             j = 0
-            while j < J and etas[j] > h_allow:
+            while j < J and tau < thr[j]:
                 j += 1
             if j < j_prev - 1:
                 j = j_prev - 1          # grow at most by 2 per step
@@ -315,7 +356,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 first = seg_start
             m = count - first
             for k in range(m):
-                sig[k] = (ta[first + k] - t) / eta
+                sig[k] = (ta[first + k] - t) * inv_etas[j]
             sig[m] = 1.0
             same = m == m_prev
             if same:
@@ -328,7 +369,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 for k in range(m + 1):
                     sig_prev[k] = sig[k]
                 m_prev = m
-                Kc_j = -1
             for l in range(p + 1):
                 a_known[l] = 0.0
                 c[l] = 0.0
@@ -338,55 +378,27 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                     acc_l += L[k, l] * fa[first + k]
                 a_known[l] = acc_l
                 c[l] = L[m, l]
-            # pass 1: propagate every mode with the known part of the force (contiguous loops)
-            for i in range(n):
-                er = Er[jt, i]
-                ei = Ei[jt, i]
-                pr[i] = er * yr[i] - ei * yi[i]
-                pi_[i] = er * yi[i] + ei * yr[i]
-            need_kc = Kc_j != jt
-            if need_kc:
-                # the new node's weights Kc = sum_l K_l c_l, in the same sweep as the known part
-                for i in range(n):
-                    Kcr[i] = 0.0
-                    Kci[i] = 0.0
-                for l in range(m + 1):
-                    al = a_known[l]
-                    cl = c[l]
-                    for i in range(n):
-                        kr = Kr[jt, l, i]
-                        ki = Ki[jt, l, i]
-                        pr[i] += kr * al
-                        pi_[i] += ki * al
-                        Kcr[i] += kr * cl
-                        Kci[i] += ki * cl
-                Kc_j = jt
-            else:
-                for l in range(m + 1):
-                    al = a_known[l]
-                    for i in range(n):
-                        pr[i] += Kr[jt, l, i] * al
-                        pi_[i] += Ki[jt, l, i] * al
+            # the structure displacement the known part of the force would give: sum_i Im(E_i y_i) plus
+            # sum_l a_l S[jt, l] (S = the tables summed over modes), one short sweep; the modes themselves are
+            # updated once per accepted step (below), with the whole force
             acc = 0.0
             for i in range(n):
-                acc += pi_[i]
+                acc += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
             wu = 0.0
             wx = 0.0
+            cu = 0.0
+            cx = 0.0
+            cs = 0.0
             for l in range(m + 1):
+                acc += a_known[l] * S[jt, l]
                 wu += a_known[l] * inv1[l]
                 wx += a_known[l] * inv2[l]
-            if need_kc:
-                # the new node's ball and structure weights change with the stencil or the step only
-                cu = 0.0
-                cx = 0.0
-                cs = 0.0
-                for l in range(m + 1):
-                    cu += c[l] * inv1[l]
-                    cx += c[l] * inv2[l]
-                    cs += c[l] * S[jt, l]
-            u_pre = u - eta * wu / m0
-            x1_pre = x1 + u * eta - eta * eta * wx / m0
-            B = eta * eta * cx / m0 + cs + R
+                cu += c[l] * inv1[l]
+                cx += c[l] * inv2[l]
+                cs += c[l] * S[jt, l]
+            u_pre = u - eta * wu * inv_m0
+            x1_pre = x1 + u * eta - eta * eta * wx * inv_m0
+            B = eta * eta * cx * inv_m0 + cs + R
             D = x1_pre - acc
             if D <= 0.0:
                 d_new = D
@@ -399,15 +411,15 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
             break
         # ---------------------------------------------------------------- accept
-        emod = 0.0
-        for i in range(n):
-            a = pr[i] + Kcr[i] * f_new
-            b = pi_[i] + Kci[i] * f_new
-            yr[i] = a
-            yi[i] = b
-            emod += ew[i] * (a * a + b * b)
-        u = u_pre - eta * f_new * cu / m0
-        x1 = x1_pre - eta * eta * f_new * cx / m0
+        # every mode over the step in one sweep: y <- E y + sum_l K_l (a_l + c_l f_new)
+        for l in range(p + 1):
+            coef[l] = a_known[l] + c[l] * f_new if l <= m else 0.0
+        if p == 5:
+            emod = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+        else:
+            emod = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
+        u = u_pre - eta * f_new * cu * inv_m0
+        x1 = x1_pre - eta * eta * f_new * cx * inv_m0
         t = t + eta
         delta = d_new
         f = f_new
