@@ -35,42 +35,40 @@ STATUS_OUT_OF_NODES = 1
 SERIES_SAMPLES = 20000
 
 
-@njit(cache=True)
-def _moments_one(theta: float, c: float, sn: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -> None:
-    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p (c, sn: cos and sin of theta).
+#: the series of K_p for |theta| < 2 keeps the terms of its real part down to this fraction of the first one, and
+#: those of its imaginary part likewise (the term that first falls below is kept too)
+_SERIES_EPS = 1e-18
 
-    |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
-    (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)!, then the
-    downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there.
-    """
-    if abs(theta) < 2.0:
-        # series for K_p
-        tr, ti = 1.0 / (p + 1), 0.0
-        sr, si = tr, ti
-        for m in range(80):
-            fac = theta / (p + m + 2)
-            tr, ti = -ti * fac, tr * fac            # term *= i theta / (p + m + 2)
-            sr += tr
-            si += ti
-            if abs(tr) + abs(ti) < 1e-18 * (abs(sr) + abs(si)):
-                break
-        out_re[p] = sr
-        out_im[p] = si
-        for l in range(p, 0, -1):
-            kr, ki = out_re[l], out_im[l]
-            out_re[l - 1] = (1.0 - theta * ki) / l     # (1 + i theta K_l) / l
-            out_im[l - 1] = (theta * kr) / l
-    else:
-        # K_0 = (e^{i theta} - 1)/(i theta) = (sin theta + i (1 - cos theta)) / theta
-        kr, ki = sn / theta, (1.0 - c) / theta
-        out_re[0] = kr
-        out_im[0] = ki
-        for l in range(1, p + 1):
-            # (l K - 1)/(i theta) = -i (l K - 1)/theta
-            ar, ai = l * kr - 1.0, l * ki
-            kr, ki = ai / theta, -ar / theta
-            out_re[l] = kr
-            out_im[l] = ki
+
+@njit(cache=True)
+def _series_coeffs(p: int, theta_max: float, ser_re: np.ndarray, ser_im: np.ndarray):
+    """Horner coefficients (in theta^2) of the series K_p = sum_m (i theta)^m c_m, c_m = p!/(p+m+1)!, for
+    |theta| <= theta_max (<= 2): ser_re[k] = (-1)^k c_2k (real part), ser_im[k] = (-1)^k c_(2k+1) (imaginary part
+    / theta), each part's terms kept down to _SERIES_EPS of its first at theta_max. Returns (n_re, n_im)."""
+    cm = 1.0 / (p + 1)
+    lead_re = cm
+    lead_im = cm / (p + 2) * theta_max
+    mag = cm                          # c_m theta_max^m
+    n_re = 0
+    n_im = 0
+    done_re = False
+    done_im = False
+    m = 0
+    while m < 2 * ser_re.shape[0] - 1 and not (done_re and done_im):
+        sign = 1.0 if (m // 2) % 2 == 0 else -1.0
+        if m % 2 == 0:
+            if not done_re:
+                ser_re[n_re] = sign * cm
+                n_re += 1
+                done_re = mag <= _SERIES_EPS * lead_re
+        elif not done_im:
+            ser_im[n_im] = sign * cm
+            n_im += 1
+            done_im = mag <= _SERIES_EPS * lead_im
+        m += 1
+        cm = cm / (p + m + 1)
+        mag = mag * theta_max / (p + m + 1)
+    return n_re, n_im
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -79,6 +77,13 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
 
     Returns Er, Ei [j, i]: e^{i omega_i eta_j}; Kr, Ki [j, l, i]: g_i int_0^eta_j e^{i omega_i (eta_j - s)}
     (s/eta_j)^l ds [m/N], g_i = phi_i^2/(m_i omega_i); S[j, l] = sum_i Ki[j, l, i] [m/N].
+
+    With theta = omega eta and K_l = int_0^1 e^{i theta (1 - s)} s^l ds (the table is g eta K_l):
+    |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
+    (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)! (Horner in
+    theta^2, `_series_coeffs`), then the downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there. Both
+    branches run over all modes of a level in loops the compiler vectorises (arguments clamped so that the branch
+    not taken stays finite); each mode then takes its own.
     """
     n = omega.shape[0]
     Er = np.empty((J + 1, n))
@@ -86,22 +91,76 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
     Kr = np.empty((J + 1, p + 1, n))
     Ki = np.empty((J + 1, p + 1, n))
     S = np.zeros((J + 1, p + 1))
-    br = np.empty(p + 1)
-    bi = np.empty(p + 1)
+    inv_l = np.empty(p + 1)
+    inv_l[0] = 0.0
+    for l in range(1, p + 1):
+        inv_l[l] = 1.0 / l
+    ser_re = np.zeros(48)
+    ser_im = np.zeros(48)
+    theta = np.empty(n)
+    x = np.empty(n)
+    inv_t = np.empty(n)
+    w = np.empty(n)
+    sr = np.empty((p + 1, n))        # series branch, K_l
+    si = np.empty((p + 1, n))
+    ur = np.empty((p + 1, n))        # upward branch, K_l
+    ui = np.empty((p + 1, n))
     for j in range(J + 1):
         eta = H / 2.0**j
+        t_small = 0.0                # the largest |theta| < 2 of the level: the series length
         for i in range(n):
-            theta = omega[i] * eta
-            c = np.cos(theta)
-            sn = np.sin(theta)
-            Er[j, i] = c
-            Ei[j, i] = sn
-            _moments_one(theta, c, sn, p, br, bi)
-            w = g[i] * eta
-            for l in range(p + 1):
-                Kr[j, l, i] = w * br[l]
-                Ki[j, l, i] = w * bi[l]
-                S[j, l] += w * bi[l]
+            th = omega[i] * eta
+            theta[i] = th
+            Er[j, i] = np.cos(th)
+            Ei[j, i] = np.sin(th)
+            w[i] = g[i] * eta
+            a = abs(th)
+            if a < 2.0 and a > t_small:
+                t_small = a
+        n_re, n_im = _series_coeffs(p, t_small, ser_re, ser_im)
+        for i in range(n):
+            th = theta[i]
+            x[i] = min(th * th, 4.0)
+            inv_t[i] = 1.0 / th if abs(th) >= 2.0 else 0.5
+        # series for K_p (real part in theta^2; imaginary part theta times a series in theta^2)
+        for i in range(n):
+            sr[p, i] = ser_re[n_re - 1]
+            si[p, i] = ser_im[n_im - 1]
+        for k in range(n_re - 2, -1, -1):
+            ck = ser_re[k]
+            for i in range(n):
+                sr[p, i] = sr[p, i] * x[i] + ck
+        for k in range(n_im - 2, -1, -1):
+            ck = ser_im[k]
+            for i in range(n):
+                si[p, i] = si[p, i] * x[i] + ck
+        for i in range(n):
+            si[p, i] *= min(max(theta[i], -2.0), 2.0)
+        for l in range(p, 0, -1):
+            il = inv_l[l]
+            for i in range(n):
+                th = min(max(theta[i], -2.0), 2.0)
+                sr[l - 1, i] = (1.0 - th * si[l, i]) * il     # (1 + i theta K_l) / l
+                si[l - 1, i] = (th * sr[l, i]) * il
+        # upward recurrence from K_0 = (sin theta + i (1 - cos theta)) / theta
+        for i in range(n):
+            ur[0, i] = Ei[j, i] * inv_t[i]
+            ui[0, i] = (1.0 - Er[j, i]) * inv_t[i]
+        for l in range(1, p + 1):
+            for i in range(n):
+                # (l K - 1)/(i theta) = -i (l K - 1)/theta
+                ur[l, i] = (l * ui[l - 1, i]) * inv_t[i]
+                ui[l, i] = -(l * ur[l - 1, i] - 1.0) * inv_t[i]
+        for l in range(p + 1):
+            acc = 0.0
+            for i in range(n):
+                small = abs(theta[i]) < 2.0
+                kr = w[i] * (sr[l, i] if small else ur[l, i])
+                ki = w[i] * (si[l, i] if small else ui[l, i])
+                Kr[j, l, i] = kr
+                Ki[j, l, i] = ki
+                acc += ki
+            S[j, l] = acc
     return Er, Ei, Kr, Ki, S
 
 
@@ -136,7 +195,8 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
     """Root delta > 0 of delta + B alpha delta^1.5 = D (D > 0); Newton from above (convex, monotone)."""
     d = D
     if B * alpha > 0.0:
-        d2 = (D / (B * alpha)) ** (2.0 / 3.0)
+        d2 = np.cbrt(D / (B * alpha))
+        d2 *= d2                       # (D / (B alpha))^(2/3)
         if d2 < d:
             d = d2
     prev = np.inf
