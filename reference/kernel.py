@@ -216,13 +216,15 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew) -> float:
+def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
     """Propagate every mode over one step, force polynomial of degree 5 (the scheme's p = 5), in one sweep
     the compiler vectorises: y_i <- e^{i omega_i eta} y_i + sum_l K_{l,i} coef_l (er, ei [mode]: the step's
     e^{i omega eta}; kr, ki [l, mode]: its moment tables [m/N], all at table level jt; coef [N]: monomial coefficients of the force
-    on the step). Returns sum_i ew_i |y_i|^2 (twice the modal energy [J])."""
+    on the step). Returns (sum_i ew_i |y_i|^2 (twice the modal energy [J]), sum_i Im(e^{i omega_i eta} y_i) [m] of the
+    new y: the free part of the next step's structure displacement if that step has the same size)."""
     c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
     emod = 0.0
+    nxt = 0.0
     for i in range(yr.shape[0]):
         y_r = yr[i]
         y_i = yi[i]
@@ -235,11 +237,12 @@ def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew) -> float:
         yr[i] = a
         yi[i] = b
         emod += ew[i] * (a * a + b * b)
-    return emod
+        nxt += er * b + ei * a
+    return emod, nxt
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m) -> float:
+def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m):
     """`_sweep6` for any degree m (coef[0..m])."""
     n = yr.shape[0]
     for i in range(n):
@@ -253,9 +256,11 @@ def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m) -> float:
             yr[i] += Kr[jt, l, i] * cl
             yi[i] += Ki[jt, l, i] * cl
     emod = 0.0
+    nxt = 0.0
     for i in range(n):
         emod += ew[i] * (yr[i] * yr[i] + yi[i] * yi[i])
-    return emod
+        nxt += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
+    return emod, nxt
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -292,6 +297,8 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     a_known = np.empty(p + 1)
     c = np.empty(p + 1)
     coef = np.zeros(p + 1)            # the step's force polynomial, new node included
+    free_jt = -1                      # table level at which free_acc = sum_i Im(E_i y_i) holds for the current y
+    free_acc = 0.0
     inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
     inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
     for l in range(p + 1):
@@ -375,6 +382,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 ua[count] = u
                 ea[count] = 0.5 * m0 * u * u + 0.5 * emod
                 seg_start = count             # the force stencil restarts here (f = 0 before)
+                free_jt = -1                  # y moved
                 m_prev = -1
                 j_prev = 0
                 count += 1
@@ -439,11 +447,15 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 a_known[l] = acc_l
                 c[l] = L[m, l]
             # the structure displacement the known part of the force would give: sum_i Im(E_i y_i) plus
-            # sum_l a_l S[jt, l] (S = the tables summed over modes), one short sweep; the modes themselves are
+            # sum_l a_l S[jt, l] (S = the tables summed over modes); the first sum comes with the last accepted
+            # step's sweep when the step size repeats, else from one short sweep here. The modes themselves are
             # updated once per accepted step (below), with the whole force
-            acc = 0.0
-            for i in range(n):
-                acc += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
+            if jt == free_jt:
+                acc = free_acc           # from the last sweep (same step size)
+            else:
+                acc = 0.0
+                for i in range(n):
+                    acc += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
             wu = 0.0
             wx = 0.0
             cu = 0.0
@@ -475,9 +487,10 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         for l in range(p + 1):
             coef[l] = a_known[l] + c[l] * f_new if l <= m else 0.0
         if p == 5:
-            emod = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+            emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
         else:
-            emod = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
+            emod, free_acc = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
+        free_jt = jt
         u = u_pre - eta * f_new * cu * inv_m0
         x1 = x1_pre - eta * eta * f_new * cx * inv_m0
         t = t + eta
