@@ -618,7 +618,7 @@ def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
     scheme is asymptotic) and divided by RATIO_SAFETY, r' = max(min(r, 2^est_order) / RATIO_SAFETY, 1.5); before
     convergence shows (r < 2), the larger of the two differences. A ratio above 2^(p+2) (p + 1 = 6 the scheme's
     order) means x_h and x_2h agree by accident: then d2 / 2^(p + 1), x_2h's error carried down one halving at
-    the scheme's order."""
+    the scheme's order. When the two differences change sign the ratio is trusted to FLIP_RATIO at most."""
     d1 = abs(x_h - x_2h)
     d2 = abs(x_2h - x_4h)
     if d1 == 0.0 or d2 > 128.0 * d1:
