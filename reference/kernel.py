@@ -778,7 +778,7 @@ def levels(n_steps: float, tol: float, smallest_factor: float) -> int:
 
 #: modes below this w = omega delta_plate / v0 count as light modes that change the contact's time scale
 LIGHT_W = 3.0
-#: the light-mode factor is at most 1 + LIGHT_CAP (the largest excess measured on random scenes was 1.22x)
+#: the light-mode factor is at most 1 + LIGHT_CAP (the largest factor needed on random scenes was 1.26)
 LIGHT_CAP = 0.5
 
 
