@@ -245,10 +245,49 @@ def check_ball_on_ball(adapter: EngineAdapter) -> None:
             assert abs(law.coefficient / k0 - 1) <= 1e-9, (law.coefficient, k0)
 
 
+def check_retry_softer(adapter: EngineAdapter) -> None:
+    """An adapter with a `retry` hook (base module doc): on the plate and the worked beam, every default and each
+    contact, given a row that failed the energy check, it returns None or a `Softer` whose settings pass
+    `check_settings`, differ from the ones that failed, are named in one line (`what`), and predict a stability
+    limit not lower (a softer model); retried again and again it stays softer each time, up to `max_retries`."""
+    import impactval
+
+    from impactval.engines.base import Softer, message
+
+    if type(adapter).retry is EngineAdapter.retry:
+        raise CheckSkipped("no retry hook (the base keeps an unstable row as it is)")
+    offered = 0
+    for name in ("plate_steel", "beam_ss_midspan"):
+        sc = impactval.load_scene(name)
+        for contact in adapter.contacts:
+            try:
+                settings = adapter.check_settings(EngineSettings(contact=contact))
+                plan = adapter.plan(sc, settings)
+            except EngineError:
+                continue
+            for _ in range(adapter.max_retries):
+                status, text = message("energy", growth="by 12%", allowed=adapter.energy_growth_limit, dt=1e-7,
+                                       limit=f"{plan.dt_limit:.3g} s")
+                failed = ImpactResult.failed(sc.name, adapter.name, status, text, settings=settings.as_dict())
+                softer = adapter.retry(sc, settings, failed)
+                if softer is None:
+                    break
+                offered += 1
+                assert isinstance(softer, Softer), softer
+                assert softer.what and "\n" not in softer.what, softer.what
+                new = adapter.check_settings(softer.settings)
+                assert new != settings, "retry returned the settings that failed"
+                new_plan = adapter.plan(sc, new)
+                assert new_plan.dt_limit >= plan.dt_limit * (1 - 1e-12), (softer.what, new_plan.dt_limit, plan.dt_limit)
+                settings, plan = new, new_plan
+    if not offered:
+        raise CheckSkipped("retry offers no softer model on the plate and the worked beam")
+
+
 CHECKS = [check_plate_hertz, check_native_linear_plate, check_result_shape, check_rerun_bit_identical,
           check_auto_dt, check_dt_above_limit_refused, check_energy_conserved, check_window_rule,
           check_unknown_option_refused, check_unsupported_settings_refused, check_execute_job_never_raises,
-          check_structure_frequencies_array, check_beam_model, check_ball_on_ball]
+          check_structure_frequencies_array, check_beam_model, check_ball_on_ball, check_retry_softer]
 
 
 def run_checks(adapter: EngineAdapter) -> dict[str, str]:

@@ -13,8 +13,8 @@ Model (SI, z up, no gravity, no friction, no damping: `angular_damping = 0`, con
   (float32 positions |x| <= L/2). SemiImplicit: attach_ke at the float32 cap (`attach_ke_for`) and N from the
   shared sizing lowered until the penalty joints' give is within GIVE_TOL (`penalty_segments`); model_error =
   the rigid chain's composed with that give (`penalty_give`). An automatic attach_ke whose run fails the energy
-  check (float32 growth) is retried at half, N re-sized, up to ATTACH_KE_RETRIES times (`run`; an explicit
-  option never is); the row records attach_ke_tried / attach_ke_retries and a validity note. Other integrators: the shared sizing capped at
+  check (float32 growth) is retried at half, N re-sized, up to ATTACH_KE_RETRIES times (the base's `retry` hook,
+  option attach_ke_scale; an explicit attach_ke never is); the row records the retries and a validity note. Other integrators: the shared sizing capped at
   MAX_SEGMENTS = 41. Supports: simply
   supported = revolute joints to the world at x = 0 and x = L (the second closes a loop:
   SemiImplicit's penalty joints give the axial freedom a roller would); clamped ends add 2EI/l;
@@ -96,6 +96,8 @@ class NewtonOptions:
     xpbd_iterations: int = option(2, "XPBD solver iterations (default 2, Newton's)", _whole)
     rotary_inertia: str = option("section", "segment rotary inertia: 'section' = m (l^2 + h^2)/12 (default), "
                                  "'none' = m l^2/12", one_of("none", "section"))
+    attach_ke_scale: float = option(1.0, "factor on the automatic attach_ke (default 1; the retry after a float32 "
+                                    "energy growth halves it)", in_range(1e-3, 1.0))
     chain_tol: float = option(DEFAULT_CHAIN_TOL, "relative tolerance the chain is sized for (capped at "
                               f"{MAX_SEGMENTS} segments, {MAX_SEGMENTS_SEMI_IMPLICIT} semi-implicit)",
                               in_range(1e-4, 0.2))
@@ -135,53 +137,32 @@ class NewtonAdapter(EngineAdapter):
                 n = segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS)).n
         return hencky_chain(scene.target, n, rotary)
 
-    #: scale on the automatic attach_ke while `run` retries a float32-unstable job (1 otherwise)
-    _attach_ke_scale: float = 1.0
+    max_retries = ATTACH_KE_RETRIES
 
     def attach_ke(self, scene, settings: EngineSettings) -> float:
-        """SemiImplicit's joint_attach_ke [N/m]: the option, or 'auto' = attach_ke_for(scene) (times the
-        retry scale while `run` retries)."""
+        """SemiImplicit's joint_attach_ke [N/m]: the option, or 'auto' = attach_ke_for(scene) times the option
+        attach_ke_scale (1 by default; the retry halves it)."""
         ke = settings.option("attach_ke", "auto")
-        return attach_ke_for(scene) * self._attach_ke_scale if ke == "auto" else float(ke)
+        return attach_ke_for(scene) * float(settings.option("attach_ke_scale", 1.0)) if ke == "auto" else float(ke)
 
-    def run(self, scene, settings: EngineSettings):
-        """The base run; then, for SemiImplicit on a beam with attach_ke 'auto' whose energy check failed
-        (float32 rounding of the stiff penalty joints pumps energy, independent of dt), up to ATTACH_KE_RETRIES
-        reruns at attach_ke * ATTACH_KE_RETRY_FACTOR^i (N re-sized for the give). The row is the first ok
-        attempt (or the last one), with diagnostics attach_ke_tried / attach_ke_retries and a validity note."""
+    def retry(self, scene, settings: EngineSettings, result):
+        """The base's "softer model" hook: SemiImplicit on a beam with attach_ke 'auto' whose row failed the energy
+        check (float32 rounding of the stiff penalty joints pumps energy, independent of dt) is rerun at
+        attach_ke_scale * ATTACH_KE_RETRY_FACTOR (N re-sized for the give at the softer attach_ke); an explicit
+        attach_ke, another integrator or another failure is kept as it is (None)."""
         from dataclasses import replace
 
-        from impactval.reference.result import Status
+        integ = settings.integrator or INTEGRATORS[0]
+        if (scene.target.kind != "beam" or integ != "semi-implicit" or settings.option("attach_ke") != "auto"
+                or not _energy_failure(result)):
+            return None
+        from impactval.engines.base import Softer
 
-        result = super().run(scene, settings)
-        if not self._retry_wanted(scene, settings, result):
-            return result
-        tried = [result.diagnostics.get("attach_ke", math.nan)]
-        first = result.message
-        for i in range(1, ATTACH_KE_RETRIES + 1):
-            self._attach_ke_scale = ATTACH_KE_RETRY_FACTOR ** i
-            try:
-                result = super().run(scene, settings)
-            finally:
-                self._attach_ke_scale = 1.0
-            tried.append(result.diagnostics.get("attach_ke", math.nan))
-            if result.status == Status.OK or not _energy_failure(result):
-                break
-        ok = result.status == Status.OK
-        note = (f"newton: automatic attach_ke {tried[0]:.3g} N/m failed the energy check ({first}); "
-                + (f"retried {len(tried) - 1}x, {'ok' if ok else 'still ' + str(result.status.value)} at "
-                   f"attach_ke {tried[-1]:.3g} N/m, N = {result.diagnostics.get('segments')}, model_error "
-                   f"{100 * result.model_error:.2g} %"))
-        diag = {**result.diagnostics, "attach_ke_tried": [float(k) for k in tried],
-                "attach_ke_retries": len(tried) - 1, "attach_ke_first_failure": first}
-        return replace(result, diagnostics=diag, validity=(*result.validity, note))
-
-    def _retry_wanted(self, scene, settings: EngineSettings, result) -> bool:
-        if scene.target.kind != "beam" or not _energy_failure(result):
-            return False
-        parsed = self.check_settings(settings)
-        return ((parsed.integrator or INTEGRATORS[0]) == "semi-implicit"
-                and parsed.option("attach_ke", "auto") == "auto")
+        scale = float(settings.option("attach_ke_scale", 1.0)) * ATTACH_KE_RETRY_FACTOR
+        softer = replace(settings, options=replace(settings.options, attach_ke_scale=scale))
+        n_old, n_new = self.chain(scene, settings).n, self.chain(scene, softer).n
+        return Softer(softer, f"attach_ke {self.attach_ke(scene, settings):.3g} -> {self.attach_ke(scene, softer):.3g}"
+                              f" N/m, N {n_old} -> {n_new}")
 
     def explicit(self, settings: EngineSettings) -> bool:
         return (settings.integrator or INTEGRATORS[0]) != "xpbd"
