@@ -177,12 +177,14 @@ class Plan:
     """What an adapter predicts before stepping: `dt_limit` [s] (2/omega_max of the discretised
     structure + ball + contact spring at its tangent stiffness at f_m; inf for an unconditionally
     stable scheme), `what` (one line: which model the limit is for), `model_error` (the structure
-    model's own relative discretisation error, NaN if unknown), `diagnostics`."""
+    model's own relative discretisation error, NaN if unknown), `diagnostics`, `validity` (warnings known
+    before stepping, e.g. a predicted model error beyond a bar: they head the row's `validity`)."""
 
     dt_limit: float = math.inf
     what: str = ""
     model_error: float = math.nan
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    validity: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -198,7 +200,7 @@ class Softer:
 class Simulation:
     """What `simulate` returns: series sampled once per step (t [s], delta [m], f [N], ball and
     contact-point displacement [m], ball velocity [m/s] toward the target, energy [J] or empty),
-    wall times [s], step count, the model's name and diagnostics; `stop` names a divergence reason
+    wall times [s], step count, the model's name, diagnostics and validity warnings (into the row's); `stop` names a divergence reason
     found while stepping ("nan", "energy", "through") or is ""."""
 
     t: np.ndarray
@@ -217,6 +219,7 @@ class Simulation:
     stop: str = ""
     frequencies: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_law: Any = None
+    validity: tuple[str, ...] = ()
 
 
 class EngineDiverged(Exception):
@@ -395,7 +398,7 @@ class EngineAdapter:
         dt = self.resolve_dt(scene, settings, plan)
         law = self.contact_law(scene, settings)
         common = dict(version=self._safe_version(), dt=dt, dt_limit=plan.dt_limit, model_error=plan.model_error,
-                      contact_law=law)
+                      contact_law=law, validity=tuple(plan.validity))
         if math.isfinite(plan.dt_limit) and dt > plan.dt_limit:
             status, text = message("dt-limit", dt=dt, limit=plan.dt_limit, what=plan.what,
                                    suggest=nice_step(DT_MARGIN * plan.dt_limit))
@@ -432,7 +435,7 @@ class EngineAdapter:
         common = dict(version=self._safe_version(), settings={**settings.as_dict(), **sim.settings},
                       n_steps=sim.n_steps, wall_time_build_s=sim.build_s, wall_time_step_s=sim.step_s,
                       diagnostics=sim.diagnostics, model=sim.model, dt=dt, dt_limit=plan.dt_limit,
-                      model_error=plan.model_error, contact_law=law)
+                      model_error=plan.model_error, contact_law=law, validity=(*plan.validity, *sim.validity))
 
         def failed(reason: str, **kw: Any) -> ImpactResult:
             status, text = message(reason, **kw)
