@@ -101,20 +101,15 @@ def test_penalty_give_is_a_compliance_in_series():
     assert g2[1] / g1[1] == pytest.approx(0.5, rel=0.05)
 
 
-@pytest.mark.slow
-def test_sizing_bounds_the_give_and_float32(adapter):
-    """SemiImplicit's sizing on the worked beam: attach_ke at the float32 cap (ke ulp(L/2) <= 0.12 v0 sqrt(k0 m),
-    <= ATTACH_KE_MAX), N with every metric's give within GIVE_TOL, the reported model_error the rigid chain's and the
-    give composed."""
-    from impactval.engines.newton_ import ATTACH_KE_MAX, FLOAT32_FORCE_FRACTION, GIVE_TOL
-    from impactval.reference.hertz import plate_impact
+def test_sizing_bounds_the_give(adapter):
+    """SemiImplicit's sizing on the worked beam: attach_ke ATTACH_KE_AUTO, the Euler-Bernoulli chain (rotary inertia
+    none), N with every metric's give within GIVE_TOL, the reported model_error the rigid chain's and the give
+    composed."""
+    from impactval.engines.newton_ import ATTACH_KE_AUTO, GIVE_TOL
 
     sc = impactval.load_scene("beam_ss_midspan")
     d = adapter.plan(sc, adapter.check_settings(EngineSettings(contact="native"))).diagnostics
-    k0 = plate_impact(sc.ball.mass, sc.alpha, sc.ball.velocity).k0
-    f_lin = sc.ball.velocity * math.sqrt(k0 * sc.ball.mass)
-    assert d["attach_ke"] * np.spacing(np.float32(sc.target.length / 2)) <= FLOAT32_FORCE_FRACTION * f_lin * (1 + 1e-9)
-    assert d["attach_ke"] <= ATTACH_KE_MAX
+    assert d["attach_ke"] == ATTACH_KE_AUTO and d["rotary_inertia"] == "none"
     for m in ("t_m", "f_m", "delta_m"):
         assert abs(d[f"penalty_give_{m}"]) <= GIVE_TOL
         assert d[f"model_error_{m}"] == pytest.approx((1 + d[f"model_error_rigid_{m}"]) * (1 + d[f"penalty_give_{m}"]) - 1)
@@ -165,16 +160,26 @@ def test_unseen_beams_native_within_1_5_percent(adapter, name):
     assert r.energy_error <= 0.02
 
 
+@pytest.fixture
+def strict_axial():
+    """A Newton adapter whose axial-noise limit is 0.2x the impact energy instead of 10x: a real run that fails it."""
+    from impactval.engines.newton_ import NewtonAdapter
+
+    a = NewtonAdapter()
+    a.axial_noise_stop = 0.2
+    return a
+
+
 @pytest.mark.slow
-def test_auto_attach_ke_retried_softer_when_float32_pumps_energy(adapter):
-    """rand_wc_on_pmma_cc (unseen), penalty contact, every default: the automatic attach_ke (4.4e9, N = 109) fails the
-    energy check (float32 growth +12 % at dt 5e-7, below the predicted limit); the adapter retries at half that
-    attach_ke, N re-sized for the give, and the row is ok within 1.5 % of the linear theory (measured f_m +0.02 %,
-    N = 119, attach_ke 2.2e9), with the retry, the attach_ke tried, the used chain's give and a validity note."""
+def test_auto_attach_ke_retried_softer_after_an_energy_failure(strict_axial):
+    """rand_wc_on_pmma_cc (unseen), penalty contact, every default but the axial-noise limit lowered to 0.2 (the
+    automatic 1.5e10 N/m puts ~39 % of the impact energy into axial noise): the base's retry hook reruns at half the
+    attach_ke, N re-sized for the give; the row is ok within 1.5 % of the linear theory, with the retry, the model
+    used, the used chain's give and a validity note; the axial noise of the used model is below the limit."""
     from impactval.engines.newton_ import ATTACH_KE_RETRY_FACTOR, attach_ke_for, penalty_give
 
     name = "tests/unseen/rand_wc_on_pmma_cc.toml"
-    r, err = _native_vs_linear(adapter, name)
+    r, err = _native_vs_linear(strict_axial, name)
     assert max(abs(e) for e in err) <= 0.015, err
     d = r.diagnostics
     sc = impactval.load_scene(name)
@@ -182,7 +187,8 @@ def test_auto_attach_ke_retried_softer_when_float32_pumps_energy(adapter):
     assert d["retry_models"][0].startswith(f"attach_ke {attach_ke_for(sc):.3g} -> ")
     assert d["attach_ke"] == pytest.approx(attach_ke_for(sc) * ATTACH_KE_RETRY_FACTOR ** d["retries"])
     assert r.settings["options"]["attach_ke_scale"] == pytest.approx(ATTACH_KE_RETRY_FACTOR ** d["retries"])
-    assert d["retry_first_failure"].startswith("energy grew")
+    assert d["retry_first_failure"].startswith("float32 axial noise")
+    assert d["axial_noise_energy"] <= 0.2
     # the row describes the model actually run: N re-sized and the give at the softer attach_ke
     from impactval.engines.chain import DEFAULT_CHAIN_TOL, hencky_chain
     from impactval.engines.newton_ import penalty_segments
@@ -190,24 +196,42 @@ def test_auto_attach_ke_retried_softer_when_float32_pumps_energy(adapter):
     assert d["segments"] == penalty_segments(sc, DEFAULT_CHAIN_TOL, d["rotary_inertia"], d["attach_ke"])
     used = hencky_chain(sc.target, d["segments"], d["rotary_inertia"])
     assert d["penalty_give_f_m"] == pytest.approx(penalty_give(sc, used, d["attach_ke"])[1])
-    assert abs(d["penalty_give_f_m"]) >= 1.5 * abs(penalty_give(sc, used, attach_ke_for(sc))[1])   # ~2x softer
     assert abs(d["penalty_give_f_m"]) <= 0.005
     assert r.model_error == pytest.approx(max(abs(d[f"model_error_{k}"]) for k in ("t_m", "f_m", "delta_m")))
-    assert any("retried 1x with a softer model" in v and ": ok, model_error" in v for v in r.validity), r.validity
-    assert r.energy_error <= adapter.energy_growth_limit
+    assert any("with a softer model" in v and ": ok, model_error" in v for v in r.validity), r.validity
 
 
 @pytest.mark.slow
-def test_explicit_attach_ke_is_never_retried(adapter):
+def test_explicit_attach_ke_is_never_retried(strict_axial):
     """The same scene with `--option newton.attach_ke=` the automatic value: the user's choice is kept, the row is
-    `unstable` (energy check), no retry, no note."""
+    `unstable` (axial noise beyond the lowered limit), no retry, no note."""
     from impactval.engines.newton_ import attach_ke_for
 
     sc = impactval.load_scene("tests/unseen/rand_wc_on_pmma_cc.toml")
-    r = adapter.run(sc, EngineSettings(contact="native", options=(("attach_ke", attach_ke_for(sc)),)))
-    assert r.status == "unstable" and r.message.startswith("energy grew"), r.message
+    r = strict_axial.run(sc, EngineSettings(contact="native", options=(("attach_ke", attach_ke_for(sc)),)))
+    assert r.status == "unstable" and r.message.startswith("float32 axial noise"), r.message
     assert "retries" not in r.diagnostics and not r.validity
     assert r.diagnostics["attach_ke"] == pytest.approx(attach_ke_for(sc))
+
+
+@pytest.mark.slow
+def test_float32_growth_is_axial_noise(adapter):
+    """The energy that grows with a stiff attach_ke is the chain's motion along the beam, made by rounding the joints'
+    x positions: moving the beam 1.5 L away from the origin (ulp of x 4x) multiplies it (measured 18 % -> 365 % at 6e9
+    N/m, ti_ss_steel_heavy, N 90) while the in-plane energy stays within 5 % and f_m, t_m do not move (5 digits)."""
+    from impactval.engines.newton_ import NewtonAdapter
+
+    sc = impactval.load_scene("tests/unseen/ti_ss_steel_heavy.toml")
+    s = EngineSettings(contact="native", segments=90, dt=1e-7, options=(("attach_ke", 6e9),))
+    near, far = NewtonAdapter(), NewtonAdapter()
+    far.origin_shift = 1.5 * sc.target.length
+    a, b = near.run(sc, s), far.run(sc, s)
+    assert a.status == b.status == "ok", (a.message, b.message)
+    ax_a, ax_b = a.diagnostics["axial_noise_energy"], b.diagnostics["axial_noise_energy"]
+    assert ax_b > 8 * ax_a and ax_b > 1.0, (ax_a, ax_b)            # ~ulp^2
+    assert a.energy_error <= 0.01 and b.energy_error <= 0.05
+    assert abs(rel(a.f_m, b.f_m)) <= 1e-3 and abs(rel(a.t_m, b.t_m)) <= 1e-3
+    assert any("axial vibration" in v for v in b.validity)
 
 
 @pytest.mark.slow
