@@ -280,22 +280,13 @@ def _run_at(adapter, scene, fraction: float, contact: str = "hertz"):
     return adapter.run(scene, EngineSettings(dt=float(f"{fraction * lim:.4g}"), contact=contact))
 
 
-def test_energy_measure_has_no_ripple(adapter, plate_scene):
-    """SemiImplicit energy = 1/2 v_before' M v_after + V (what symplectic Euler conserves, as the MuJoCo
-    adapters): at half the predicted limit (3 steps per contact) the growth is the contact's real energy
-    change, the rebound's (v_out/v0)^2 - 1 (measured +3.9 %; the mean-velocity measure read it as instability)."""
-    r = _run_at(adapter, plate_scene, 0.5)
-    assert r.status == "ok", r.message
-    e = np.asarray(r.energy)
-    assert abs((e.max() / e[0] - 1.0) - ((r.rebound_velocity / plate_scene.ball.velocity) ** 2 - 1.0)) < 1e-3
+def test_plate_energy_near_the_limit(adapter):
+    """The shared conformance check (engines/conformance.py, check_plate_energy_near_the_limit): ok at 0.354-0.595 of
+    the predicted limit (first unstable dt measured 0.71 of it, as MuJoCo C) and, at half of it, an energy growth equal
+    to the rebound's real energy change (measured +3.9 %; the mean-velocity measure read +11.8 %)."""
+    from impactval.engines.conformance import check_plate_energy_near_the_limit
 
-
-@pytest.mark.parametrize("fraction", [0.354, 0.42, 0.5, 0.595])
-def test_plate_stable_below_0_7_of_the_predicted_limit(adapter, plate_scene, fraction):
-    """First unstable dt on the plate (2^(1/4) grid from 0.35 dt_limit) not below 0.7 of the prediction
-    (measured 0.71 like MuJoCo C and MuJoCo Warp; with the mean-velocity energy it was 0.42)."""
-    r = _run_at(adapter, plate_scene, fraction)
-    assert r.status == "ok", r.message
+    check_plate_energy_near_the_limit(adapter, None)
 
 
 @pytest.mark.slow
@@ -314,6 +305,12 @@ def test_beam_blows_up_just_above_the_predicted_limit(adapter):
     onset between 1.02 and 1.05; the old estimate 2 sqrt(attach_ke/m) was 1.34x the real limit)."""
     beam = impactval.load_scene("beam_ss_midspan")
     lim = adapter.plan(beam, adapter.check_settings(EngineSettings(dt=1e-6, contact="native"))).dt_limit
-    sim = adapter.simulate(beam, adapter.check_settings(EngineSettings(dt=float(f"{1.1 * lim:.4g}"), contact="native")))
+    from impactval.engines.base import EngineDiverged
+
+    try:      # the highest mode is the penalty chain's axial one: the axial-noise guard catches it first (measured)
+        sim = adapter.simulate(beam, adapter.check_settings(EngineSettings(dt=float(f"{1.1 * lim:.4g}"), contact="native")))
+    except EngineDiverged as err:
+        assert str(err).startswith("float32 axial noise") and err.diagnostics["axial_noise_energy"] > 10
+        return
     e = np.asarray(sim.energy)
     assert not np.all(np.isfinite(e)) or np.nanmax(e) / e[0] - 1.0 > 0.05
