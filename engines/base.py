@@ -279,6 +279,8 @@ class EngineAdapter:
     module: str = ""
     contacts: tuple[str, ...] = ("hertz",)
     integrators: tuple[str, ...] = ()
+    #: integrator -> method (a key of impactval.sweep.METHODS: nominal order and name), for the sweep's order check
+    integrator_methods: dict[str, str] = {}
     Options: type = NoOptions
     #: energy may grow by at most this fraction before a run is classed "unstable"
     energy_growth_limit: float = 0.05

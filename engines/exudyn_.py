@@ -211,6 +211,8 @@ class ExudynAdapter(EngineAdapter):
     module = "exudyn"
     contacts = ("native", "hertz")
     integrators = tuple(SOLVERS)
+    integrator_methods = {"generalized-alpha": "generalized-alpha", "trapezoidal": "trapezoidal",
+                          "explicit-euler": "explicit-euler", "rk44": "rk4", "rk67": "rk6"}
     expected_failures = {
         "check_native_linear_plate": "Exudyn's native contact is Hertz (exponent 1.5, issue 6); the linear "
                                      "spring k0 is contact 'native' with option ('law', 'linear')",

@@ -64,7 +64,7 @@ import numpy as np
 from impactval.engines.base import EngineDiverged, EngineSettings, Plan, SteppingAdapter, contact_scene, plate_times
 from impactval.engines.chain import DEFAULT_CHAIN_TOL, HenckyChain, centring, hencky_chain, omega_max, segments_for
 from impactval.engines.options import in_range, numbers, one_of, option, positive
-from impactval.errors import EngineError
+from impactval.errors import EngineError, ImpactvalError
 
 #: MuJoCo integrators offered (first = default); "discrete" damps contacts and is left out
 INTEGRATORS = ("Euler", "implicitfast", "RK4")
@@ -427,6 +427,8 @@ class MujocoAdapter(SteppingAdapter):
     module = "mujoco"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    integrator_methods = {"Euler": "symplectic-euler", "implicitfast": "symplectic-euler-implicit-damping",
+                          "RK4": "rk4"}
     min_segments = 2
     Options = MujocoOptions
     sample_lag = 1          # after mj_step, positions-derived data describe the step's start (see step)
@@ -705,6 +707,47 @@ def _contact_diag_a(mujoco, model, scene) -> float:
     return float(d.efc_diagA[rows[0]])
 
 
+#: convergence tolerance of every solimp fit (scipy least_squares xtol = ftol) and its evaluations per start
+SOLIMP_FIT_TOL = 1e-8
+SOLIMP_FIT_EVALS = 300
+#: smallest solimp d0 a fit may return (MuJoCo's impedance floor)
+SOLIMP_MIN_D0 = 1e-4
+
+
+def fit_solimp(residual, stiffness_ref: float, width_ref: float, dmax: float, starts, lower, upper,
+               x_scale=None) -> tuple[float, tuple[float, ...], float]:
+    """The one solimp fit (native-hertz here, `impactval.tune`'s pre-fit): a direct-solref stiffness and a
+    Hertz-shaped solimp minimising `residual(k, solimp)` (a vector) by bounded least squares from each start.
+
+    Parameters p = (ln(k / stiffness_ref), d0 / dmax, ln(width / width_ref), midpoint, power) within
+    [lower, upper]: k = stiffness_ref e^p0 (in the caller's unit), solimp = (max(p1 dmax, SOLIMP_MIN_D0), dmax,
+    width_ref e^p2 [m], midpoint, power). A start whose residual raises ValueError or ImpactvalError is
+    skipped. Returns (k, solimp, RMS of the residual vector at the best start's optimum); EngineError
+    when every start failed."""
+    from scipy import optimize
+
+    def unpack(p):
+        solimp = (max(p[1] * dmax, SOLIMP_MIN_D0), dmax, math.exp(p[2]) * width_ref, p[3], p[4])
+        return math.exp(p[0]) * stiffness_ref, tuple(float(x) for x in solimp)
+
+    best = None
+    for start in starts:
+        try:
+            sol = optimize.least_squares(lambda p: residual(*unpack(p)), np.array(start, float),
+                                         bounds=(np.asarray(lower, float), np.asarray(upper, float)),
+                                         x_scale=x_scale, xtol=SOLIMP_FIT_TOL, ftol=SOLIMP_FIT_TOL,
+                                         max_nfev=SOLIMP_FIT_EVALS)
+        except (ValueError, ImpactvalError):
+            continue
+        if best is None or sol.cost < best.cost:
+            best = sol
+    if best is None:
+        raise EngineError(f"mujoco: the solimp fit failed from all {len(starts)} starts (impedance <= {dmax:g}); "
+                          "use --contact native (a linear spring) for this scene.")
+    k, solimp = unpack(best.x)
+    return k, solimp, float(np.sqrt(np.mean(best.fun ** 2)))
+
+
 @lru_cache(maxsize=16)
 def fit_native_hertz(scene) -> tuple[float, tuple[float, ...], float]:
     """Fit the contact pair's direct solref stiffness and solimp shape so MuJoCo's static force law
@@ -715,7 +758,6 @@ def fit_native_hertz(scene) -> tuple[float, tuple[float, ...], float]:
     solimp, RMS misfit of the force law over f_m). The impedance is kept <= NATIVE_HERTZ_DMAX (see there).
     """
     import mujoco
-    from scipy import optimize
 
     from impactval.reference.hertz import plate_impact
     from impactval.scenarios.scene import RigidPlate, Scene
@@ -731,36 +773,17 @@ def fit_native_hertz(scene) -> tuple[float, tuple[float, ...], float]:
     ball_geom = model.geom("ball").id
     deltas = np.linspace(0.02, 1.2, 30) * plate.delta_m
     target = scene.alpha * deltas**1.5
-    width0 = 1.2 * plate.delta_m
 
-    def unpack(p):
-        k = math.exp(p[0]) * plate.k0 * a_inv_mass
-        dw = NATIVE_HERTZ_DMAX
-        return k, (max(p[1] * dw, 1e-4), dw, math.exp(p[2]) * width0, p[3], p[4])
-
-    def resid(p):
-        k, solimp = unpack(p)
-        model.pair_solref[0] = (-k, 0.0)
+    def resid(k, solimp):
+        model.pair_solref[0] = (-k * a_inv_mass, 0.0)
         model.pair_solimp[0] = solimp
         f = _static_contact_force(mujoco, model, d, jq, z0, deltas, ball_geom)
         return (f - target) / plate.f_m
 
-    lo = np.array([-3.0, 0.1, -3.0, 0.01, 1.0])
-    hi = np.array([3.0, 1.0, 3.0, 0.99, 6.0])
-    best = None
-    for start in ([0.0, 0.5, 0.0, 0.5, 1.5], [0.5, 0.2, 0.3, 0.3, 1.0], [0.2, 0.7, -0.5, 0.1, 3.0]):
-        try:
-            sol = optimize.least_squares(resid, np.array(start), bounds=(lo, hi), xtol=1e-10, ftol=1e-10,
-                                         max_nfev=300)
-        except Exception:  # noqa: BLE001 - a failed start is just a worse fit
-            continue
-        if best is None or sol.cost < best.cost:
-            best = sol
-    if best is None:
-        raise EngineError("mujoco: the native-hertz solimp fit failed from every start.")
-    k, solimp = unpack(best.x)
-    rms = float(np.sqrt(np.mean(resid(best.x) ** 2)))
-    return k / a_inv_mass, tuple(float(x) for x in solimp), rms
+    k, solimp, rms = fit_solimp(resid, plate.k0, 1.2 * plate.delta_m, NATIVE_HERTZ_DMAX,
+                                starts=([0.0, 0.5, 0.0, 0.5, 1.5], [0.5, 0.2, 0.3, 0.3, 1.0], [0.2, 0.7, -0.5, 0.1, 3.0]),
+                                lower=[-3.0, 0.1, -3.0, 0.01, 1.0], upper=[3.0, 1.0, 3.0, 0.99, 6.0])
+    return k, solimp, rms
 
 
 def _tabulated_potential(mujoco, model, scene, plate):

@@ -90,6 +90,7 @@ class MujocoWarpAdapter(EngineAdapter):
     module = "mujoco_warp"
     contacts = ("hertz", "native", "native-hertz")
     integrators = INTEGRATORS
+    integrator_methods = MujocoAdapter.integrator_methods
     min_segments = 2
     Options = MujocoWarpOptions
 

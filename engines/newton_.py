@@ -121,6 +121,7 @@ class NewtonAdapter(EngineAdapter):
     module = "newton"
     contacts = ("hertz", "native")
     integrators = INTEGRATORS
+    integrator_methods = {"semi-implicit": "symplectic-euler"}   # featherstone, xpbd: not declared
     min_segments = 2
     Options = NewtonOptions
     # check_beam_model passes since the penalty sizing (worked beam, Hertz: t_m -0.24 / f_m +0.33 / delta_m +0.22 %,

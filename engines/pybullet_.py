@@ -181,6 +181,7 @@ class PybulletAdapter(SteppingAdapter):
     module = "pybullet"
     contacts = ("hertz", "native", "native-hertz")
     integrators = ("semi-implicit-euler",)
+    integrator_methods = {"semi-implicit-euler": "symplectic-euler"}
     Options = PybulletOptions
     expected_failures: dict[str, str] = {}
     sample_lag = 1          # a step's reported force belongs to the penetration at its start

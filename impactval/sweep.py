@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Any, Iterable
 
 import numpy as np
@@ -41,24 +42,29 @@ FLOOR_FRACTION = 0.1
 PRECISION = {"mujoco-warp": float(np.finfo(np.float32).eps), "newton": float(np.finfo(np.float32).eps)}
 _DOUBLE_EPS = float(np.finfo(np.float64).eps)
 
-#: nominal global order of each engine's integrators (engine, integrator) -> (order, description)
-NOMINAL_ORDERS: dict[tuple[str, str], tuple[float, str]] = {
-    ("mujoco", "Euler"): (1, "semi-implicit (symplectic) Euler"),
-    ("mujoco", "implicitfast"): (1, "semi-implicit Euler with implicit velocity-dependent forces"),
-    ("mujoco", "implicit"): (1, "semi-implicit Euler with implicit velocity-dependent forces"),
-    ("mujoco", "RK4"): (4, "classical 4th-order Runge-Kutta"),
-    ("pybullet", "semi-implicit-euler"): (1, "semi-implicit (symplectic) Euler"),
-    ("exudyn", "generalized-alpha"): (2, "generalized-alpha"),
-    ("exudyn", "trapezoidal"): (2, "trapezoidal rule"),
-    ("exudyn", "explicit-euler"): (1, "explicit Euler"),
-    ("exudyn", "rk44"): (4, "classical 4th-order Runge-Kutta"),
-    ("exudyn", "rk67"): (6, "6th-order Runge-Kutta"),
-    ("mujoco-warp", "Euler"): (1, "semi-implicit (symplectic) Euler"),
-    ("newton", "semi-implicit"): (1, "semi-implicit (symplectic) Euler"),
+#: integration methods an adapter's integrators are declared as (`EngineAdapter.integrator_methods`):
+#: method -> (nominal global order, description)
+METHODS: dict[str, tuple[float, str]] = {
+    "symplectic-euler": (1, "semi-implicit (symplectic) Euler"),
+    "symplectic-euler-implicit-damping": (1, "semi-implicit Euler with implicit velocity-dependent forces"),
+    "explicit-euler": (1, "explicit Euler"), "trapezoidal": (2, "trapezoidal rule"),
+    "generalized-alpha": (2, "generalized-alpha"), "rk4": (4, "classical 4th-order Runge-Kutta"),
+    "rk6": (6, "6th-order Runge-Kutta"),
 }
-#: the engines' default integrator (the row's integrator column may be empty for it)
-DEFAULT_INTEGRATOR = {"mujoco": "Euler", "pybullet": "semi-implicit-euler", "exudyn": "generalized-alpha"}
-_SYMPLECTIC_EULER = ("semi-implicit (symplectic) Euler", "semi-implicit Euler with implicit velocity-dependent forces")
+_SYMPLECTIC_EULER = ("symplectic-euler", "symplectic-euler-implicit-damping")
+
+
+@lru_cache(maxsize=None)
+def _declared(engine: str) -> tuple[str, dict[str, str]]:
+    """(default integrator, integrator -> method) as the engine's adapter declares them; ("", {}) when the
+    adapter cannot be loaded (its module only: no engine is imported)."""
+    from impactval.engines.base import adapter_class
+
+    try:
+        cls = adapter_class(engine)
+    except Exception:  # noqa: BLE001 - an unknown or broken adapter just has no nominal orders
+        return "", {}
+    return (cls.integrators[0] if cls.integrators else ""), dict(cls.integrator_methods)
 
 
 # ---------------------------------------------------------------------------- the grid
@@ -218,7 +224,7 @@ def with_score(df: pd.DataFrame) -> pd.DataFrame:
     d["score"] = largest_error(d)
     d["dt"] = pd.to_numeric(d["dt"], errors="coerce")
     integ = d["integrator"].fillna("").astype(str)
-    d["integrator"] = [i or DEFAULT_INTEGRATOR.get(e, "") for i, e in zip(integ, d["engine"].astype(str))]
+    d["integrator"] = [i or _declared(e)[0] for i, e in zip(integ, d["engine"].astype(str))]
     d["segments"] = [_size_text(v) for v in d["segments"]]
     d["step_time_s"] = pd.to_numeric(d["wall_time_step_s"], errors="coerce")
     steps = pd.to_numeric(d["n_steps"], errors="coerce")
@@ -395,8 +401,14 @@ def _noise(g: pd.DataFrame, metric: str) -> float:
     return float(ref * rel) if math.isfinite(ref) else 0.0
 
 
+def _method(engine: str, integrator: str) -> str:
+    default, methods = _declared(engine)
+    return methods.get(integrator or default, "")
+
+
 def _nominal(engine: str, integrator: str) -> tuple[float, str]:
-    return NOMINAL_ORDERS.get((engine, integrator), (math.nan, integrator or "engine default"))
+    """(nominal global order, description) of the engine's integrator (its default when empty); NaN if undeclared."""
+    return METHODS.get(_method(engine, integrator), (math.nan, integrator or "engine default"))
 
 
 def explain_order(engine: str, integrator: str, metric: str, order: float, target_kind: str, contact: str,
@@ -425,7 +437,7 @@ def _explain_order(engine: str, integrator: str, metric: str, order: float, targ
     head = f"{name}, nominal order {nominal:g}: "
     if abs(order - nominal) <= 0.3:
         return head + "observed as nominal"
-    if order > nominal and name in _SYMPLECTIC_EULER and abs(order - 2) <= 0.4:
+    if order > nominal and _method(engine, integrator) in _SYMPLECTIC_EULER and abs(order - 2) <= 0.4:
         return head + ("observed order 2 because semi-implicit Euler steps the positions exactly as Stoermer-Verlet "
                        "does (it is Verlet with the velocity sampled half a step off); t_m, f_m and delta_m are read "
                        "from positions and position-dependent forces, so they inherit Verlet's second order, while "

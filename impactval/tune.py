@@ -260,41 +260,24 @@ def mujoco_shape_prefit(mass: float, alpha: float, targets: Sequence[Target],
     """Direct solref and a Hertz-shaped solimp (d0 < dwidth = dmax, width, midpoint, power) whose pure
     MuJoCo law (`mujoco_force`, m_eff = mass) best matches Hertz's t_m and f_m at every target speed on
     a rigid plate (least squares of the log ratios). Returns (solref, solimp, rms of the log residuals)."""
-    from scipy import optimize
+    from impactval.engines.mujoco_ import fit_solimp   # the adapter's fit (no engine import: mujoco loads lazily)
 
     dm_top = max(t.delta_m for t in targets)
     dm_low = min(t.delta_m for t in targets)
     speeds = np.array([t.speed for t in targets])
     t_ref = np.array([t.t_m for t in targets])
     f_ref = np.array([t.f_m for t in targets])
-    k_ref = 0.8 * alpha * math.sqrt(dm_top)
 
-    def unpack(p):
-        ks = math.exp(p[0]) * k_ref / mass
-        solimp = (max(p[1] * dmax, 1e-4), dmax, math.exp(p[2]) * dm_top, p[3], p[4])
-        return (-ks, 0.0), solimp
-
-    def resid(p):
-        solref, solimp = unpack(p)
-        tm, fm, _ = law_plate(lambda x: mujoco_force(x, solref, solimp, mass), mass, speeds, 50 * dm_top,
+    def resid(k, solimp):
+        tm, fm, _ = law_plate(lambda x: mujoco_force(x, (-k / mass, 0.0), solimp, mass), mass, speeds, 50 * dm_top,
                               1e-3 * dm_low, 1500)
         return np.concatenate([np.log(tm / t_ref), np.log(fm / f_ref)])
 
-    lo = np.array([-3.0, 0.0, -3.0, 0.001, 1.0])
-    hi = np.array([3.0, 0.99, 3.0, 0.98, 20.0])
-    best = None
-    for start in ([0.0, 0.3, 0.0, 0.1, 1.5], [0.3, 0.1, 0.5, 0.01, 4.0]):
-        try:
-            sol = optimize.least_squares(resid, np.array(start), bounds=(lo, hi), x_scale=[1, 0.1, 1, 0.1, 1],
-                                         max_nfev=200)
-        except (ValueError, ImpactvalError):
-            continue
-        if best is None or sol.cost < best.cost:
-            best = sol
-    if best is None:
-        raise ImpactvalError("mujoco: the solimp shape pre-fit failed from every start.")
-    solref, solimp = unpack(best.x)
-    return solref, solimp, float(np.sqrt(np.mean(best.fun**2)))
+    k, solimp, rms = fit_solimp(resid, 0.8 * alpha * math.sqrt(dm_top), dm_top, dmax,
+                                starts=([0.0, 0.3, 0.0, 0.1, 1.5], [0.3, 0.1, 0.5, 0.01, 4.0]),
+                                lower=[-3.0, 0.0, -3.0, 0.001, 1.0], upper=[3.0, 0.99, 3.0, 0.98, 20.0],
+                                x_scale=[1, 0.1, 1, 0.1, 1])
+    return (-k / mass, 0.0), solimp, rms
 
 
 def mujoco_effective_mass(scene) -> dict[str, float]:

@@ -1,5 +1,7 @@
 """impactval sweep (issue 13): grid parsing, the analysis functions, and the bars on real engines."""
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +11,7 @@ import pytest
 from impactval import sweep as sw
 from impactval.errors import ImpactvalError
 from conftest import requires_mujoco, requires_pybullet
+from hostile_cases import BAD_RANGE_CASES
 
 UNSEEN = str(Path(__file__).parent / "data" / "unseen_titanium_beam.toml")
 
@@ -30,15 +33,9 @@ def test_per_engine_prefixes_and_defaults():
     assert sw.parse_axis(None, "segments", "int", ["mujoco"]) == {"mujoco": [None]}
 
 
-@pytest.mark.parametrize("text, field, kind, fix", [
-    ("1e-5:abc:4", "dt", "float", "a:b:n"),
-    ("1e-5:1e-6:1", "dt", "float", "n >= 2"),
-    ("-1e-6", "dt", "float", "positive"),
-    ("21:81:3", "segments", "int", "list"),
-    ("twenty", "segments", "int", "whole numbers"),
-    ("exudyn.rk44", "integrator", "str", "not in --engines"),
-    (",", "dt", "float", "at least one"),
-])
+@pytest.mark.parametrize("text, field, kind, fix", [(text, "dt", "float", words) for text, words in BAD_RANGE_CASES] + [
+    ("21:81:3", "segments", "int", "list"), ("twenty", "segments", "int", "whole numbers"),
+    ("exudyn.rk44", "integrator", "str", "not in --engines")])
 def test_bad_axis_is_one_line_naming_the_field(text, field, kind, fix):
     with pytest.raises(ImpactvalError) as err:
         sw.parse_axis(text, field, kind, ["mujoco"])
@@ -60,6 +57,26 @@ def test_grid_is_the_product_and_a_plate_has_no_segments_axis(plate_scene):
     assert len(jobs) == (6 + 3) + (12 + 6)
     assert len({j.key for j in jobs}) == len(jobs)
     assert {j.settings.segments for j in jobs if j.scene.name == "plate_steel"} == {None}
+
+
+def test_nominal_orders_are_what_the_adapters_declare():
+    """Each registered adapter maps only its own integrators, onto known methods; the default integrator is the
+    adapter's first; reading them imports no engine."""
+    from impactval.engines import ENGINES
+    from impactval.engines.base import adapter_class
+
+    for name in ENGINES:
+        cls = adapter_class(name)
+        assert set(cls.integrator_methods) <= set(cls.integrators), name
+        assert set(cls.integrator_methods.values()) <= set(sw.METHODS), name
+        assert cls.integrators[0] in cls.integrator_methods, name          # the default has a nominal order
+    assert sw._nominal("mujoco", "") == (1, "semi-implicit (symplectic) Euler")
+    assert sw._nominal("mujoco", "RK4")[0] == 4 and sw._nominal("exudyn", "rk67")[0] == 6
+    assert sw._nominal("exudyn", "")[0] == 2 and sw._nominal("mujoco-warp", "")[0] == 1
+    assert math.isnan(sw._nominal("exudyn", "dopri5")[0]) and math.isnan(sw._nominal("no-such-engine", "x")[0])
+    code = ("import sys; from impactval import sweep as sw; [sw._nominal(e, '') for e in sw._known_engines([])]; "
+            "print(sorted({'mujoco', 'pybullet', 'exudyn', 'warp', 'newton', 'mujoco_warp'} & set(sys.modules)))")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
 
 
 # ---------------------------------------------------------------------------- order fitting

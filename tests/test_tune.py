@@ -156,6 +156,29 @@ def test_effective_mass_from_the_model():
     assert got["m_invweight"] == pytest.approx(M, rel=1e-9)
 
 
+def test_the_one_solimp_fit_recovers_a_known_law_and_fails_in_one_line():
+    """engines.mujoco_.fit_solimp (tune's pre-fit and the adapter's native-hertz): a force law made by MuJoCo's
+    impedance formula from known (k, solimp) is recovered to 1e-6 of its peak from a start away from it; a
+    residual that always raises gives one EngineError line. Needs scipy only, not mujoco."""
+    from impactval.engines.mujoco_ import fit_solimp
+    from impactval.errors import EngineError
+
+    pens = np.linspace(2e-7, 2e-5, 40)
+    true = T.mujoco_force(pens, (-3e9, 0.0), (2e-4, 1e-3, 1.5e-5, 0.3, 2.5), 1.0)
+    fit_k, solimp, rms = fit_solimp(lambda k, si: (T.mujoco_force(pens, (-k, 0.0), si, 1.0) - true) / true[-1],
+                                    1e9, 1e-5, 1e-3, starts=([0.0, 0.5, 0.0, 0.5, 1.5],),
+                                    lower=[-3.0, 0.0, -3.0, 0.01, 1.0], upper=[3.0, 0.99, 3.0, 0.99, 6.0])
+    got = T.mujoco_force(pens, (-fit_k, 0.0), solimp, 1.0)
+    assert rms < 1e-6 and np.max(np.abs(got - true)) < 1e-6 * true[-1]
+    assert solimp[1] == 1e-3 and solimp[0] >= 1e-4
+
+    def broken(k, si):
+        raise ValueError("no")
+    with pytest.raises(EngineError, match=r"^mujoco: the solimp fit failed from all 2 starts") as err:
+        fit_solimp(broken, 1.0, 1.0, 1e-3, starts=([0.0] * 5, [0.1] * 5), lower=[-1] * 5, upper=[1] * 5)
+    assert "\n" not in str(err.value)
+
+
 # ------------------------------------------------------------------------------------- fits over engine runs
 
 @pytest.fixture(scope="module")
