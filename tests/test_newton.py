@@ -3,6 +3,7 @@
 Runs only with `impactval[newton]` installed (not part of `[all]`, see docs/newton.md).
 """
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -316,3 +317,20 @@ def test_beam_blows_up_just_above_the_predicted_limit(adapter):
         return
     e = np.asarray(sim.energy)
     assert not np.all(np.isfinite(e)) or np.nanmax(e) / e[0] - 1.0 > 0.05
+
+
+@pytest.mark.slow
+def test_run_prints_the_rows_caveat_before_the_table(tmp_path, monkeypatch):
+    """`impactval run` on a Timoshenko scene with Newton: the predicted-model-error note is printed with the job's
+    line, before the table's numbers."""
+    from click.testing import CliRunner
+
+    from impactval.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    scene = str(Path(__file__).parent / "unseen" / "stubby_steel_timoshenko.toml")
+    res = CliRunner().invoke(main, ["run", scene, "--engines", "newton", "--contact", "hertz"])
+    text = res.output + (getattr(res, "stderr", "") or "")
+    assert res.exit_code == 0, text
+    note = text.find("note: newton: predicted model error 1.6 % > 1.5 %")
+    assert 0 <= note < text.find("stubby_steel_timoshenko  newton"), text
