@@ -16,6 +16,8 @@ def load_scene(name_or_path):
 
 
 _SOLVE_OPTIONS = ("window", "modes", "static_correction")
+_SOLVE_OPTION_SET = frozenset(_SOLVE_OPTIONS)
+_SOLVE_IMPL: list = []          # (checks module, reference solve), imported on the first call
 
 
 def solve(scene, tol: float = 1e-6, **kwargs):
@@ -25,11 +27,14 @@ def solve(scene, tol: float = 1e-6, **kwargs):
     followed after the first contact), `modes` (beam mode count), `static_correction` (bool); see
     :func:`impactval.reference.solve.solve`. Bad arguments raise ImpactvalError naming the argument.
     """
-    from impactval import checks
-    from impactval.reference.solve import solve as _solve
+    if not _SOLVE_IMPL:
+        from impactval import checks
+        from impactval.reference.solve import solve as _solve
 
-    unknown = sorted(set(kwargs) - set(_SOLVE_OPTIONS))
-    if unknown:
+        _SOLVE_IMPL[:] = [checks, _solve]
+    checks, _solve = _SOLVE_IMPL
+    if not _SOLVE_OPTION_SET.issuperset(kwargs):
+        unknown = sorted(set(kwargs) - _SOLVE_OPTION_SET)
         raise ImpactvalError(f"solve() has no option {unknown[0]!r}; options: tol, {', '.join(_SOLVE_OPTIONS)}.")
     opts = dict(kwargs)
     if "window" in opts:

@@ -35,42 +35,40 @@ STATUS_OUT_OF_NODES = 1
 SERIES_SAMPLES = 20000
 
 
-@njit(cache=True)
-def _moments_one(theta: float, c: float, sn: float, p: int, out_re: np.ndarray, out_im: np.ndarray) -> None:
-    """out[l] = int_0^1 e^{i theta (1 - s)} s^l ds, l = 0..p (c, sn: cos and sin of theta).
+#: the series of K_p for |theta| < 2 keeps the terms of its real part down to this fraction of the first one, and
+#: those of its imaginary part likewise (the term that first falls below is kept too)
+_SERIES_EPS = 1e-18
 
-    |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
-    (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)!, then the
-    downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there.
-    """
-    if abs(theta) < 2.0:
-        # series for K_p
-        tr, ti = 1.0 / (p + 1), 0.0
-        sr, si = tr, ti
-        for m in range(80):
-            fac = theta / (p + m + 2)
-            tr, ti = -ti * fac, tr * fac            # term *= i theta / (p + m + 2)
-            sr += tr
-            si += ti
-            if abs(tr) + abs(ti) < 1e-18 * (abs(sr) + abs(si)):
-                break
-        out_re[p] = sr
-        out_im[p] = si
-        for l in range(p, 0, -1):
-            kr, ki = out_re[l], out_im[l]
-            out_re[l - 1] = (1.0 - theta * ki) / l     # (1 + i theta K_l) / l
-            out_im[l - 1] = (theta * kr) / l
-    else:
-        # K_0 = (e^{i theta} - 1)/(i theta) = (sin theta + i (1 - cos theta)) / theta
-        kr, ki = sn / theta, (1.0 - c) / theta
-        out_re[0] = kr
-        out_im[0] = ki
-        for l in range(1, p + 1):
-            # (l K - 1)/(i theta) = -i (l K - 1)/theta
-            ar, ai = l * kr - 1.0, l * ki
-            kr, ki = ai / theta, -ar / theta
-            out_re[l] = kr
-            out_im[l] = ki
+
+@njit(cache=True)
+def _series_coeffs(p: int, theta_max: float, ser_re: np.ndarray, ser_im: np.ndarray):
+    """Horner coefficients (in theta^2) of the series K_p = sum_m (i theta)^m c_m, c_m = p!/(p+m+1)!, for
+    |theta| <= theta_max (<= 2): ser_re[k] = (-1)^k c_2k (real part), ser_im[k] = (-1)^k c_(2k+1) (imaginary part
+    / theta), each part's terms kept down to _SERIES_EPS of its first at theta_max. Returns (n_re, n_im)."""
+    cm = 1.0 / (p + 1)
+    lead_re = cm
+    lead_im = cm / (p + 2) * theta_max
+    mag = cm                          # c_m theta_max^m
+    n_re = 0
+    n_im = 0
+    done_re = False
+    done_im = False
+    m = 0
+    while m < 2 * ser_re.shape[0] - 1 and not (done_re and done_im):
+        sign = 1.0 if (m // 2) % 2 == 0 else -1.0
+        if m % 2 == 0:
+            if not done_re:
+                ser_re[n_re] = sign * cm
+                n_re += 1
+                done_re = mag <= _SERIES_EPS * lead_re
+        elif not done_im:
+            ser_im[n_im] = sign * cm
+            n_im += 1
+            done_im = mag <= _SERIES_EPS * lead_im
+        m += 1
+        cm = cm / (p + m + 1)
+        mag = mag * theta_max / (p + m + 1)
+    return n_re, n_im
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -79,6 +77,13 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
 
     Returns Er, Ei [j, i]: e^{i omega_i eta_j}; Kr, Ki [j, l, i]: g_i int_0^eta_j e^{i omega_i (eta_j - s)}
     (s/eta_j)^l ds [m/N], g_i = phi_i^2/(m_i omega_i); S[j, l] = sum_i Ki[j, l, i] [m/N].
+
+    With theta = omega eta and K_l = int_0^1 e^{i theta (1 - s)} s^l ds (the table is g eta K_l):
+    |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
+    (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)! (Horner in
+    theta^2, `_series_coeffs`), then the downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there. Both
+    branches run over all modes of a level in loops the compiler vectorises (arguments clamped so that the branch
+    not taken stays finite); each mode then takes its own.
     """
     n = omega.shape[0]
     Er = np.empty((J + 1, n))
@@ -86,22 +91,76 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
     Kr = np.empty((J + 1, p + 1, n))
     Ki = np.empty((J + 1, p + 1, n))
     S = np.zeros((J + 1, p + 1))
-    br = np.empty(p + 1)
-    bi = np.empty(p + 1)
+    inv_l = np.empty(p + 1)
+    inv_l[0] = 0.0
+    for l in range(1, p + 1):
+        inv_l[l] = 1.0 / l
+    ser_re = np.zeros(48)
+    ser_im = np.zeros(48)
+    theta = np.empty(n)
+    x = np.empty(n)
+    inv_t = np.empty(n)
+    w = np.empty(n)
+    sr = np.empty((p + 1, n))        # series branch, K_l
+    si = np.empty((p + 1, n))
+    ur = np.empty((p + 1, n))        # upward branch, K_l
+    ui = np.empty((p + 1, n))
     for j in range(J + 1):
         eta = H / 2.0**j
+        t_small = 0.0                # the largest |theta| < 2 of the level: the series length
         for i in range(n):
-            theta = omega[i] * eta
-            c = np.cos(theta)
-            sn = np.sin(theta)
-            Er[j, i] = c
-            Ei[j, i] = sn
-            _moments_one(theta, c, sn, p, br, bi)
-            w = g[i] * eta
-            for l in range(p + 1):
-                Kr[j, l, i] = w * br[l]
-                Ki[j, l, i] = w * bi[l]
-                S[j, l] += w * bi[l]
+            th = omega[i] * eta
+            theta[i] = th
+            Er[j, i] = np.cos(th)
+            Ei[j, i] = np.sin(th)
+            w[i] = g[i] * eta
+            a = abs(th)
+            if a < 2.0 and a > t_small:
+                t_small = a
+        n_re, n_im = _series_coeffs(p, t_small, ser_re, ser_im)
+        for i in range(n):
+            th = theta[i]
+            x[i] = min(th * th, 4.0)
+            inv_t[i] = 1.0 / th if abs(th) >= 2.0 else 0.5
+        # series for K_p (real part in theta^2; imaginary part theta times a series in theta^2)
+        for i in range(n):
+            sr[p, i] = ser_re[n_re - 1]
+            si[p, i] = ser_im[n_im - 1]
+        for k in range(n_re - 2, -1, -1):
+            ck = ser_re[k]
+            for i in range(n):
+                sr[p, i] = sr[p, i] * x[i] + ck
+        for k in range(n_im - 2, -1, -1):
+            ck = ser_im[k]
+            for i in range(n):
+                si[p, i] = si[p, i] * x[i] + ck
+        for i in range(n):
+            si[p, i] *= min(max(theta[i], -2.0), 2.0)
+        for l in range(p, 0, -1):
+            il = inv_l[l]
+            for i in range(n):
+                th = min(max(theta[i], -2.0), 2.0)
+                sr[l - 1, i] = (1.0 - th * si[l, i]) * il     # (1 + i theta K_l) / l
+                si[l - 1, i] = (th * sr[l, i]) * il
+        # upward recurrence from K_0 = (sin theta + i (1 - cos theta)) / theta
+        for i in range(n):
+            ur[0, i] = Ei[j, i] * inv_t[i]
+            ui[0, i] = (1.0 - Er[j, i]) * inv_t[i]
+        for l in range(1, p + 1):
+            for i in range(n):
+                # (l K - 1)/(i theta) = -i (l K - 1)/theta
+                ur[l, i] = (l * ui[l - 1, i]) * inv_t[i]
+                ui[l, i] = -(l * ur[l - 1, i] - 1.0) * inv_t[i]
+        for l in range(p + 1):
+            acc = 0.0
+            for i in range(n):
+                small = abs(theta[i]) < 2.0
+                kr = w[i] * (sr[l, i] if small else ur[l, i])
+                ki = w[i] * (si[l, i] if small else ui[l, i])
+                Kr[j, l, i] = kr
+                Ki[j, l, i] = ki
+                acc += ki
+            S[j, l] = acc
     return Er, Ei, Kr, Ki, S
 
 
@@ -136,7 +195,8 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
     """Root delta > 0 of delta + B alpha delta^1.5 = D (D > 0); Newton from above (convex, monotone)."""
     d = D
     if B * alpha > 0.0:
-        d2 = (D / (B * alpha)) ** (2.0 / 3.0)
+        d2 = np.cbrt(D / (B * alpha))
+        d2 *= d2                       # (D / (B alpha))^(2/3)
         if d2 < d:
             d = d2
     prev = np.inf
@@ -153,6 +213,54 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
             break
         prev = abs(step)
     return d
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
+    """Propagate every mode over one step, force polynomial of degree 5 (the scheme's p = 5), in one sweep
+    the compiler vectorises: y_i <- e^{i omega_i eta} y_i + sum_l K_{l,i} coef_l (er, ei [mode]: the step's
+    e^{i omega eta}; kr, ki [l, mode]: its moment tables [m/N], all at table level jt; coef [N]: monomial coefficients of the force
+    on the step). Returns (sum_i ew_i |y_i|^2 (twice the modal energy [J]), sum_i Im(e^{i omega_i eta} y_i) [m] of the
+    new y: the free part of the next step's structure displacement if that step has the same size)."""
+    c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
+    emod = 0.0
+    nxt = 0.0
+    for i in range(yr.shape[0]):
+        y_r = yr[i]
+        y_i = yi[i]
+        er = Er[jt, i]
+        ei = Ei[jt, i]
+        a = (er * y_r - ei * y_i + Kr[jt, 0, i] * c0 + Kr[jt, 1, i] * c1 + Kr[jt, 2, i] * c2 + Kr[jt, 3, i] * c3
+             + Kr[jt, 4, i] * c4 + Kr[jt, 5, i] * c5)
+        b = (er * y_i + ei * y_r + Ki[jt, 0, i] * c0 + Ki[jt, 1, i] * c1 + Ki[jt, 2, i] * c2 + Ki[jt, 3, i] * c3
+             + Ki[jt, 4, i] * c4 + Ki[jt, 5, i] * c5)
+        yr[i] = a
+        yi[i] = b
+        emod += ew[i] * (a * a + b * b)
+        nxt += er * b + ei * a
+    return emod, nxt
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m):
+    """`_sweep6` for any degree m (coef[0..m])."""
+    n = yr.shape[0]
+    for i in range(n):
+        a = Er[jt, i] * yr[i] - Ei[jt, i] * yi[i]
+        b = Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
+        yr[i] = a
+        yi[i] = b
+    for l in range(m + 1):
+        cl = coef[l]
+        for i in range(n):
+            yr[i] += Kr[jt, l, i] * cl
+            yi[i] += Ki[jt, l, i] * cl
+    emod = 0.0
+    nxt = 0.0
+    for i in range(n):
+        emod += ew[i] * (yr[i] * yr[i] + yi[i] * yi[i])
+        nxt += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
+    return emod, nxt
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -175,8 +283,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     gam = (p - 0.5) / (p + 1.0)
     yr = np.zeros(n)
     yi = np.zeros(n)
-    pr = np.zeros(n)
-    pi_ = np.zeros(n)
     ta = np.empty(max_nodes)
     da = np.empty(max_nodes)
     fa = np.empty(max_nodes)
@@ -190,8 +296,9 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     Pw = np.empty(p + 2)
     a_known = np.empty(p + 1)
     c = np.empty(p + 1)
-    Kcr = np.empty(n)
-    Kci = np.empty(n)
+    coef = np.zeros(p + 1)            # the step's force polynomial, new node included
+    free_jt = -1                      # table level at which free_acc = sum_i Im(E_i y_i) holds for the current y
+    free_acc = 0.0
     inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
     inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
     for l in range(p + 1):
@@ -199,8 +306,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         inv2[l] = 1.0 / ((l + 1) * (l + 2))
     cu = 0.0
     cx = 0.0
-    cs = 0.0
-    Kc_j = -1
     m_prev = -1
 
     t = 0.0
@@ -221,8 +326,13 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     j_prev = J
     t_end = -1.0
     etas = np.empty(J + 1)
+    inv_etas = np.empty(J + 1)
+    thr = np.empty(J + 1)
     for q in range(J + 1):
         etas[q] = H / 2.0**q
+        inv_etas[q] = 2.0**q / H
+        thr[q] = T_w * 2.0 ** (-q / gam)
+    inv_m0 = 1.0 / m0
     while True:
         if count >= max_nodes:
             return STATUS_OUT_OF_NODES, count, ta, da, fa, xa, ua, ea, flags
@@ -272,6 +382,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 ua[count] = u
                 ea[count] = 0.5 * m0 * u * u + 0.5 * emod
                 seg_start = count             # the force stencil restarts here (f = 0 before)
+                free_jt = -1                  # y moved
                 m_prev = -1
                 j_prev = 0
                 count += 1
@@ -280,24 +391,22 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
         # ---------------------------------------------------------------- choose the step
         if in_contact:
-            h_allow = H
-            tau_s = t - ta[seg_start]
-            if tau_s < T_w:
-                h_allow = H * (tau_s / T_w) ** gam
+            # graded step eta <= H (tau / T_w)^gam towards both ends: level j is allowed where tau >= thr[j] =
+            # T_w 2^(-j / gam) (the same rule without a power per step)
+            tau = t - ta[seg_start]
             if count - seg_start >= 3 and delta > 0.0:
-                # predicted time to separation from a quadratic through the last three nodes
+                # predicted time to separation delta / (-delta') from the quadratic through the last three nodes
                 t0, t1, t2 = ta[count - 3], ta[count - 2], ta[count - 1]
                 d0, d1, d2 = da[count - 3], da[count - 2], da[count - 1]
-                dd = (d0 * (t2 - t1) / ((t0 - t1) * (t0 - t2)) + d1 * (t2 - t0) / ((t1 - t0) * (t1 - t2))
-                      + d2 * (2 * t2 - t0 - t1) / ((t2 - t0) * (t2 - t1)))
-                if dd < 0.0:
-                    tau_e = delta / (-dd)
-                    if tau_e < T_w:
-                        h2 = H * (tau_e / T_w) ** gam
-                        if h2 < h_allow:
-                            h_allow = h2
+                h1 = t1 - t0
+                h2 = t2 - t1
+                num = d2 * h1 * (2.0 * h2 + h1) - d1 * (h1 + h2) * (h1 + h2) + d0 * h2 * h2    # delta' h1 h2 (h1 + h2)
+                if num < 0.0:
+                    tau_e = delta * (h1 * h2 * (h1 + h2)) / (-num)
+                    if tau_e < tau:
+                        tau = tau_e
             j = 0
-            while j < J and etas[j] > h_allow:
+            while j < J and tau < thr[j]:
                 j += 1
             if j < j_prev - 1:
                 j = j_prev - 1          # grow at most by 2 per step
@@ -315,7 +424,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 first = seg_start
             m = count - first
             for k in range(m):
-                sig[k] = (ta[first + k] - t) / eta
+                sig[k] = (ta[first + k] - t) * inv_etas[j]
             sig[m] = 1.0
             same = m == m_prev
             if same:
@@ -328,7 +437,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 for k in range(m + 1):
                     sig_prev[k] = sig[k]
                 m_prev = m
-                Kc_j = -1
             for l in range(p + 1):
                 a_known[l] = 0.0
                 c[l] = 0.0
@@ -338,55 +446,31 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                     acc_l += L[k, l] * fa[first + k]
                 a_known[l] = acc_l
                 c[l] = L[m, l]
-            # pass 1: propagate every mode with the known part of the force (contiguous loops)
-            for i in range(n):
-                er = Er[jt, i]
-                ei = Ei[jt, i]
-                pr[i] = er * yr[i] - ei * yi[i]
-                pi_[i] = er * yi[i] + ei * yr[i]
-            need_kc = Kc_j != jt
-            if need_kc:
-                # the new node's weights Kc = sum_l K_l c_l, in the same sweep as the known part
-                for i in range(n):
-                    Kcr[i] = 0.0
-                    Kci[i] = 0.0
-                for l in range(m + 1):
-                    al = a_known[l]
-                    cl = c[l]
-                    for i in range(n):
-                        kr = Kr[jt, l, i]
-                        ki = Ki[jt, l, i]
-                        pr[i] += kr * al
-                        pi_[i] += ki * al
-                        Kcr[i] += kr * cl
-                        Kci[i] += ki * cl
-                Kc_j = jt
+            # the structure displacement the known part of the force would give: sum_i Im(E_i y_i) plus
+            # sum_l a_l S[jt, l] (S = the tables summed over modes); the first sum comes with the last accepted
+            # step's sweep when the step size repeats, else from one short sweep here. The modes themselves are
+            # updated once per accepted step (below), with the whole force
+            if jt == free_jt:
+                acc = free_acc           # from the last sweep (same step size)
             else:
-                for l in range(m + 1):
-                    al = a_known[l]
-                    for i in range(n):
-                        pr[i] += Kr[jt, l, i] * al
-                        pi_[i] += Ki[jt, l, i] * al
-            acc = 0.0
-            for i in range(n):
-                acc += pi_[i]
+                acc = 0.0
+                for i in range(n):
+                    acc += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
             wu = 0.0
             wx = 0.0
+            cu = 0.0
+            cx = 0.0
+            cs = 0.0
             for l in range(m + 1):
+                acc += a_known[l] * S[jt, l]
                 wu += a_known[l] * inv1[l]
                 wx += a_known[l] * inv2[l]
-            if need_kc:
-                # the new node's ball and structure weights change with the stencil or the step only
-                cu = 0.0
-                cx = 0.0
-                cs = 0.0
-                for l in range(m + 1):
-                    cu += c[l] * inv1[l]
-                    cx += c[l] * inv2[l]
-                    cs += c[l] * S[jt, l]
-            u_pre = u - eta * wu / m0
-            x1_pre = x1 + u * eta - eta * eta * wx / m0
-            B = eta * eta * cx / m0 + cs + R
+                cu += c[l] * inv1[l]
+                cx += c[l] * inv2[l]
+                cs += c[l] * S[jt, l]
+            u_pre = u - eta * wu * inv_m0
+            x1_pre = x1 + u * eta - eta * eta * wx * inv_m0
+            B = eta * eta * cx * inv_m0 + cs + R
             D = x1_pre - acc
             if D <= 0.0:
                 d_new = D
@@ -399,15 +483,16 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
             break
         # ---------------------------------------------------------------- accept
-        emod = 0.0
-        for i in range(n):
-            a = pr[i] + Kcr[i] * f_new
-            b = pi_[i] + Kci[i] * f_new
-            yr[i] = a
-            yi[i] = b
-            emod += ew[i] * (a * a + b * b)
-        u = u_pre - eta * f_new * cu / m0
-        x1 = x1_pre - eta * eta * f_new * cx / m0
+        # every mode over the step in one sweep: y <- E y + sum_l K_l (a_l + c_l f_new)
+        for l in range(p + 1):
+            coef[l] = a_known[l] + c[l] * f_new if l <= m else 0.0
+        if p == 5:
+            emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+        else:
+            emod, free_acc = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
+        free_jt = jt
+        u = u_pre - eta * f_new * cu * inv_m0
+        x1 = x1_pre - eta * eta * f_new * cx * inv_m0
         t = t + eta
         delta = d_new
         f = f_new

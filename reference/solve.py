@@ -67,6 +67,12 @@ def structure_modes(scene, n: int | None = None, residual: bool = False) -> Mode
     return _modes(scene, n, residual)
 
 
+@lru_cache(maxsize=256)
+def _plate(mass: float, alpha: float, v0: float):
+    """plate_impact (a frozen result) for repeated solves of one ball and contact."""
+    return plate_impact(mass, alpha, v0)
+
+
 def _select(modes: Modes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     key = id(modes)
     hit = _SELECT_CACHE.get(key)
@@ -170,12 +176,13 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
     (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
-    plate = plate_impact(mass, alpha, v0)
+    plate = _plate(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
     # the base step is then shortened until modes it does not resolve stay within UNRESOLVED_SHARE tol (kernel)
     n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
-    check_window(window, plate.t_m, tol)
+    if window > 0.0:
+        check_window(window, plate.t_m, tol)
     st, cnt, t, d, f, x, u, e, flags, fine, rel, n, end, drift = kernel.solve_auto(
         omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
         P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, UNRESOLVED_THETA, UNRESOLVED_C, SMALLEST_STEP_FACTOR,
@@ -282,14 +289,15 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         n_modes = md.n
     m = run.metrics
     values = (m.t_m, m.f_m, m.delta_m, unc.t_m, unc.f_m, unc.delta_m, run.rebound_velocity)
-    if not all(math.isfinite(v) for v in values) or min(m.t_m, m.f_m, m.delta_m) <= 0.0:
+    if not all(map(math.isfinite, values)) or min(m.t_m, m.f_m, m.delta_m) <= 0.0:
         raise ImpactvalError(f"scene {scene.name!r}: the reference solver got a non-finite or non-positive answer "
                              f"(t_m={m.t_m!r}, f_m={m.f_m!r}, delta_m={m.delta_m!r}): an input is outside the range "
                              f"double precision can carry (check the ball's and target's sizes, masses and "
                              f"frequencies).")
     validity = hertz_validity(scene, m.f_m, m.delta_m)
-    if _rel(unc, m) > tol * (1 + 1e-9):
-        validity += (f"uncertainty {_rel(unc, m):.2g} (relative) is above tol {tol:g}: the mode count or step "
+    rel = _rel(unc, m)
+    if rel > tol * (1 + 1e-9):
+        validity += (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the mode count or step "
                      f"reached its limit",)
     return ImpactResult(
         scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m, validity=validity,

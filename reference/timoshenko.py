@@ -31,6 +31,8 @@ import numpy as np
 
 #: grid points per pi of wave phase when bracketing roots of the frequency equation
 GRID_PER_PI = 32
+#: the root search starts at this fraction of the first simply supported frequency (below any support's first)
+GRID_START = 1e-3
 
 
 @dataclass(frozen=True)
@@ -201,18 +203,24 @@ def _phase(sec: Section, omega: np.ndarray) -> np.ndarray:
 
 
 def _grid(sec: Section, omega_hi: float) -> np.ndarray:
-    """Frequencies from ~0 to omega_hi with <= pi/GRID_PER_PI of wave phase between neighbours."""
-    om = np.geomspace(omega_hi * 1e-6, omega_hi, 400)
-    for _ in range(3):
+    """Frequencies from below the first natural frequency to omega_hi with <= pi/GRID_PER_PI of wave phase
+    between neighbours.
+
+    The grid starts at GRID_START x the first simply supported frequency: every support's first frequency lies
+    above that (a cantilever's is ~0.36x it), whatever omega_hi is (a start tied to omega_hi, 1e-6 omega_hi,
+    skipped the first root of a slender cantilever once n reached 4096 modes)."""
+    lo = min(GRID_START * float(ss_frequencies(sec, 1)[0][0]), 0.5 * omega_hi)
+    om = np.geomspace(lo, omega_hi, 400)
+    for _ in range(20):
         ph = _phase(sec, om)
         steps = np.maximum(np.ceil(np.diff(ph) / (math.pi / GRID_PER_PI)).astype(int), 1)
         if np.all(steps == 1):
-            break
+            return om
         i = np.repeat(np.arange(len(steps)), steps)
         first = np.repeat(np.cumsum(steps) - steps, steps)
         frac = (np.arange(len(i)) - first) / steps[i]
         om = np.concatenate([om[i] + frac * (om[i + 1] - om[i]), om[-1:]])
-    return om
+    raise RuntimeError("timoshenko frequency grid did not reach its phase resolution")   # pragma: no cover
 
 
 def _bisect(sec: Section, support: str, lo: np.ndarray, hi: np.ndarray, f_lo: np.ndarray) -> np.ndarray:
