@@ -77,26 +77,45 @@ def main() -> None:
 
 
 def newton_beams() -> None:
-    """Newton SemiImplicit on the worked and the five unseen beams with its own sizing (attach_ke at the float32
-    cap, N with the penalty joints' give <= 0.5 %): the row's error next to the predicted model_error split
-    (rigid-jointed chain + give, exact linear theory); then the old 41-segment chain at attach_ke 1e9 / 3e9 (the
-    cancellation) and the float32 energy growth against attach_ke at N = 61 (python ... newton)."""
+    """Newton SemiImplicit, every default, on the worked and every unseen beam, native (vs the linear theory) and
+    injected Hertz (vs the Hertz reference): status, N, attach_ke, retries, errors, the predicted model_error
+    (rigid-jointed chain + give, exact linear theory), in-plane energy and axial noise (docs/newton.md's table); then
+    the float32 findings: axial noise against the origin's distance (ulp of x) and the ball's integrated point
+    (centre vs lowest point) at dt 4e-8 (python benchmarks/bench_warp_engines.py newton)."""
     from impactval.engines.newton_ import NewtonAdapter
+    from impactval.reference.linear import solve_linear
+
+    def row(adapter, beam, **kw):
+        sc = impactval.load_scene(beam)
+        r = adapter.run(sc, EngineSettings(**kw))
+        d = r.diagnostics
+        label = f"{Path(beam).stem:28s} {kw.get('contact', 'hertz'):6s} {kw.get('dt', 'auto')!s:6s}"
+        if r.status != "ok":
+            print(f"{label} {r.status}: {r.message}", flush=True)
+            return
+        ref = impactval.solve(sc) if kw.get("contact") != "native" else solve_linear(sc, stiffness=d["contact_stiffness"])
+        err = [100 * (a / b - 1) for a, b in ((r.t_m, ref.t_m), (r.f_m, ref.f_m), (r.delta_m, ref.delta_m))]
+        print(f"{label} N {d['segments']:3d} attach_ke {d['attach_ke']:.3g} retries {d.get('retries', 0)}: "
+              f"{err[0]:+.2f} / {err[1]:+.2f} / {err[2]:+.2f} %, predicted {100 * d['model_error_t_m']:+.2f} / "
+              f"{100 * d['model_error_f_m']:+.2f} % (model_error {100 * r.model_error:.2f} %), in-plane energy "
+              f"{100 * r.energy_error:.2f} %, axial noise {100 * d['axial_noise_energy']:.0f} %, dt {r.dt:.2g} s"
+              f"{' [' + '; '.join(r.validity) + ']' if r.validity else ''}", flush=True)
 
     adapter = NewtonAdapter()
     for beam in ["beam_ss_midspan"] + sorted(str(p) for p in UNSEEN.glob("*.toml")):
         for contact in ("native", "hertz"):
-            s = adapter.check_settings(EngineSettings(dt="auto", contact=contact))
-            d = adapter.plan(impactval.load_scene(beam), s).diagnostics
-            print(f"{'':12s} {Path(beam).stem:20s} predicted f_m: rigid chain {100 * d['model_error_rigid_f_m']:+.3f} % "
-                  f"(Hertz), give {100 * d['penalty_give_f_m']:+.3f} % (linear), model_error "
-                  f"{100 * d['model_error_f_m']:+.3f} %; attach_ke {d['attach_ke']:.3g}, "
-                  f"shear fraction {d['penalty_shear_fraction']:.3f}", flush=True)
-            line("newton", beam, dt="auto", contact=contact)
-    for ke in (1e9, 3e9):
-        line("newton", "beam_ss_midspan", dt="auto", contact="native", segments=41, options=(("attach_ke", ke),))
-    for ke in (3e9, 6e9, 1e10, 3e10):         # float32: energy growth (dt-independent) against attach_ke
-        line("newton", "beam_ss_midspan", dt=2e-7, contact="native", segments=61, options=(("attach_ke", ke),))
+            row(adapter, beam, contact=contact)
+    heavy = str(UNSEEN / "ti_ss_steel_heavy.toml")
+    for shift in (0.0, 0.5, 1.5):            # the ulp of the joints' x: axial noise ~ulp^2, metrics unchanged
+        far = NewtonAdapter()
+        far.origin_shift = shift * impactval.load_scene(heavy).target.length
+        print(f"origin {shift:g} L away:", end=" ")
+        row(far, heavy, contact="native", segments=90, dt=1e-7, options=(("attach_ke", 6e9),))
+    for at_bottom in (True, False):          # the ball's integrated point: float32 rounding of its z per step
+        ball = NewtonAdapter()
+        ball.ball_at_contact_point = at_bottom
+        print(f"ball point at its {'lowest point' if at_bottom else 'centre'}:", end=" ")
+        row(ball, heavy, contact="hertz", dt=4e-8)
 
 
 def onset(engine: str) -> None:

@@ -22,7 +22,16 @@ suite). Import the engine only inside methods. Then implement
 - optionally `kinematics(model) -> (x_ball [m], x_structure [m], v_ball [m/s])` (displacements
   into the target, ball speed toward it), `frequencies(model) -> array` [rad/s] (the structure
   model's natural frequencies), `contact_law(scene, settings)`, `plan(scene, settings)` (the predicted
-  stability limit `dt_limit` [s] of the explicit model and its `model_error`, see `Plan`).
+  stability limit `dt_limit` [s] of the explicit model and its `model_error`, see `Plan`), and
+  `retry(scene, settings, result) -> Softer | None` (a softer model after an instability, below).
+
+**Retry with a softer model** (both levels): when a run ends `unstable` while stepping (energy growth, NaN,
+the ball through the target, `EngineDiverged`; never a dt refused above the predicted limit: that is the
+user's step), the base asks `retry` for a `Softer` (settings of a softer model + one line naming it) and
+reruns, at most `max_retries` times. The row is the first attempt that is not unstable (else the last),
+with diagnostics `retries`, `retry_models` (each `Softer.what`), `retry_first_failure` (the first
+message) and a `validity` note, so the user reads that the model was softened before any number. The
+conformance suite checks that a retry's model is softer (its predicted limit is not lower).
 
 The base owns everything else: option parsing, the time step ("auto" = the largest 1-2-5 value
 below both DT_MARGIN * dt_limit and t_plate / STEPS_PER_CONTACT), refusing a dt above the predicted
@@ -168,19 +177,30 @@ class Plan:
     """What an adapter predicts before stepping: `dt_limit` [s] (2/omega_max of the discretised
     structure + ball + contact spring at its tangent stiffness at f_m; inf for an unconditionally
     stable scheme), `what` (one line: which model the limit is for), `model_error` (the structure
-    model's own relative discretisation error, NaN if unknown), `diagnostics`."""
+    model's own relative discretisation error, NaN if unknown), `diagnostics`, `validity` (warnings known
+    before stepping, e.g. a predicted model error beyond a bar: they head the row's `validity`)."""
 
     dt_limit: float = math.inf
     what: str = ""
     model_error: float = math.nan
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    validity: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Softer:
+    """What `EngineAdapter.retry` returns: `settings` of a softer model (parsed or raw; the base checks them
+    again) and `what`, one line naming the change (e.g. "attach_ke 6e+09 -> 3e+09 N/m, N 68 -> 39")."""
+
+    settings: EngineSettings
+    what: str
 
 
 @dataclass
 class Simulation:
     """What `simulate` returns: series sampled once per step (t [s], delta [m], f [N], ball and
     contact-point displacement [m], ball velocity [m/s] toward the target, energy [J] or empty),
-    wall times [s], step count, the model's name and diagnostics; `stop` names a divergence reason
+    wall times [s], step count, the model's name, diagnostics and validity warnings (into the row's); `stop` names a divergence reason
     found while stepping ("nan", "energy", "through") or is ""."""
 
     t: np.ndarray
@@ -199,6 +219,7 @@ class Simulation:
     stop: str = ""
     frequencies: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_law: Any = None
+    validity: tuple[str, ...] = ()
 
 
 class EngineDiverged(Exception):
@@ -265,6 +286,8 @@ class EngineAdapter:
     energy_growth_limit: float = 0.05
     #: known gaps, by check name -> reason (become strict xfails in the conformance suite)
     expected_failures: dict[str, str] = {}
+    #: most reruns with a softer model per job (`retry`)
+    max_retries: int = 3
 
     # ------------------------------------------------------------------ to override
     def simulate(self, scene, settings: EngineSettings) -> Simulation:  # pragma: no cover - abstract
@@ -278,6 +301,12 @@ class EngineAdapter:
         p = plate_times(scene)
         k = law.stiffness(p.delta_m)
         return Plan(2.0 / math.sqrt(k / contact_mass(scene)), "ball on the contact spring's tangent stiffness at f_m")
+
+    def retry(self, scene, settings: EngineSettings, result: ImpactResult) -> Softer | None:
+        """After `settings` (parsed) gave `result`, `unstable` while stepping: a softer model to rerun with, or
+        None to keep the row (default: never retry). A softer model's predicted limit (`plan().dt_limit`) must
+        not be lower (the conformance suite checks it); keep a user's explicit choice (return None)."""
+        return None
 
     def explicit(self, settings: EngineSettings) -> bool:
         """True when the integrator has a stability limit (default: yes)."""
@@ -341,21 +370,42 @@ class EngineAdapter:
         return nice_step(cap)
 
     def run(self, scene, settings: EngineSettings) -> ImpactResult:
-        """Plan, build and step the scene in this process; failures become statuses. Never overridden."""
+        """Plan, build and step the scene in this process; failures become statuses; an instability while
+        stepping is rerun with the adapter's softer model (`retry`, module doc). Never overridden."""
         if not self.available():
             status, text = message("not-installed", module=self.module, hint=self.install_hint())
             return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict())
         settings = self.check_settings(settings)
+        result, stepped_unstable = self._attempt(scene, settings)
+        first, models = result, []
+        while stepped_unstable and len(models) < self.max_retries:
+            softer = self.retry(scene, settings, result)
+            if softer is None:
+                break
+            settings = self.check_settings(softer.settings)
+            models.append(softer.what)
+            result, stepped_unstable = self._attempt(scene, settings)
+        if not models:
+            return result
+        me = f"{100 * result.model_error:.2g} %" if math.isfinite(result.model_error) else "unknown"
+        note = (f"{self.name}: unstable with its default model ({first.message}); retried {len(models)}x with a "
+                f"softer model ({'; '.join(models)}): {result.status.value}, model_error {me}")
+        diag = {**result.diagnostics, "retries": len(models), "retry_models": models,
+                "retry_first_failure": first.message}
+        return replace(result, diagnostics=diag, validity=(*result.validity, note))
+
+    def _attempt(self, scene, settings: EngineSettings) -> tuple[ImpactResult, bool]:
+        """One plan-build-step of parsed settings: (row, True when it went unstable while stepping)."""
         plan = self.plan(scene, settings)
         dt = self.resolve_dt(scene, settings, plan)
         law = self.contact_law(scene, settings)
         common = dict(version=self._safe_version(), dt=dt, dt_limit=plan.dt_limit, model_error=plan.model_error,
-                      contact_law=law)
+                      contact_law=law, validity=tuple(plan.validity))
         if math.isfinite(plan.dt_limit) and dt > plan.dt_limit:
             status, text = message("dt-limit", dt=dt, limit=plan.dt_limit, what=plan.what,
                                    suggest=nice_step(DT_MARGIN * plan.dt_limit))
             return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict(),
-                                       diagnostics=dict(plan.diagnostics), **common)
+                                       diagnostics=dict(plan.diagnostics), **common), False
         settings = replace(settings, dt=dt)
         try:
             sim = self.simulate(scene, settings)
@@ -365,11 +415,12 @@ class EngineAdapter:
                 why += f" (predicted stability limit {plan.dt_limit:.3g} s)"
             status, text = message("diverged", why=why)
             return ImpactResult.failed(scene.name, self.name, status, text, settings=settings.as_dict(),
-                                       diagnostics={**plan.diagnostics, **err.diagnostics}, **common)
+                                       diagnostics={**plan.diagnostics, **err.diagnostics}, **common), True
         sim.diagnostics = {**plan.diagnostics, **sim.diagnostics}
         if sim.frequencies.size and "structure_frequencies" not in sim.diagnostics:
             sim.diagnostics["structure_frequencies"] = [float(x) for x in sim.frequencies]
-        return self.result_from(scene, settings, sim, plan, sim.contact_law or law)
+        result = self.result_from(scene, settings, sim, plan, sim.contact_law or law)
+        return result, result.status == Status.UNSTABLE
 
     def _safe_version(self) -> str:
         try:
@@ -386,7 +437,7 @@ class EngineAdapter:
         common = dict(version=self._safe_version(), settings={**settings.as_dict(), **sim.settings},
                       n_steps=sim.n_steps, wall_time_build_s=sim.build_s, wall_time_step_s=sim.step_s,
                       diagnostics=sim.diagnostics, model=sim.model, dt=dt, dt_limit=plan.dt_limit,
-                      model_error=plan.model_error, contact_law=law)
+                      model_error=plan.model_error, contact_law=law, validity=(*plan.validity, *sim.validity))
 
         def failed(reason: str, **kw: Any) -> ImpactResult:
             status, text = message(reason, **kw)
@@ -799,6 +850,6 @@ def run_isolated(spec: str, scene, settings: EngineSettings) -> ImpactResult:
     return ImpactResult.failed(scene.name, name, status, text, settings=settings.as_dict())
 
 
-__all__ = ["EngineAdapter", "SteppingAdapter", "EngineSettings", "Simulation", "Plan", "EngineDiverged",
+__all__ = ["EngineAdapter", "SteppingAdapter", "EngineSettings", "Simulation", "Plan", "Softer", "EngineDiverged",
            "contacts_from_series", "execute_job", "plate_times", "contact_scene", "contact_mass", "through_depth", "run_isolated", "load_adapter", "adapter_class", "CONTACT_MODES",
            "MESSAGES", "message", "DT_MARGIN", "STEPS_PER_CONTACT", "WINDOW_CAP", "nice_step"]

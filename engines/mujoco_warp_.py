@@ -231,13 +231,20 @@ class MujocoWarpAdapter(EngineAdapter):
             if settings.segments is None:
                 c_n = default_segments(scene, EngineSettings(options=(("chain_tol", settings.options.chain_tol),)))
                 if c_n > lay.n_segments:
+                    from impactval.engines.chain import hencky_chain, model_error
+
+                    me = model_error(scene, hencky_chain(scene.target, lay.n_segments, settings.options.rotary_inertia))
                     notes.append(f"chain capped at {lay.n_segments} segments for float32 (MAX_SEGMENTS, COND_LIMIT; "
-                                 f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}")
+                                 f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}; "
+                                 f"predicted model error t_m {100 * me.t_m:+.2g} / f_m {100 * me.f_m:+.2g} % (the capped "
+                                 f"chain's own: its f_m swings with where the hit falls in a segment, and the sizing takes "
+                                 f"the N near the cap with the smallest)")
         if notes:
             diagnostics["validity"] = "; ".join(notes)
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
                          energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,
+                         validity=tuple(f"mujoco-warp: {n}" for n in notes),
                          settings={"integrator": settings.integrator or INTEGRATORS[0],
                                    "segments": lay.n_segments or None})
         if contact == "native" and info.get("contact_stiffness"):

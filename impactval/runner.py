@@ -480,6 +480,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         rows[k] = stored
         if progress is not None:
             progress.done(job.label(), stored, seconds)
+            for warning in res.validity or ():      # the engine's own caveats, before any table or report
+                progress.note(f"  note: {warning}")
         if on_row is not None:
             on_row(stored)
 

@@ -2,8 +2,7 @@
 
 Honesty: on random scenes (beams of all three supports and both theories, plates, modal targets, rigid plates;
 random materials, balls 1-50 mm, 0.01-10 m/s, impact points; explicit mode counts with and without the
-residual flexibility, and the automatic mode count) the real error does not exceed the reported uncertainty; the
-few measured exceptions (explicit mode counts) are reported in docs/reference.md and guarded here by count and size.
+residual flexibility, and the automatic mode count) the real error does not exceed the reported uncertainty.
 Real errors come from the independent ODE form (scipy DOP853, reference/ode.py) where it applies (no residual
 flexibility, few modes) and otherwise from a much tighter solve (tol 1e-12, or many more modes at 1e-11).
 Tightness: on the catalogue the reported uncertainty is within 10x of the real error where measured so (the
@@ -101,16 +100,13 @@ def test_uncertainty_bounds_the_ode_form_on_random_scenes(seed):
         assert max(_metrics(unc) / _metrics(run.metrics)) <= tol
 
 
-@pytest.mark.parametrize("seeds,max_misses,worst", [
-    (range(150), 2, 1.25),
-    pytest.param(range(150, 650), 3, 1.7, marks=pytest.mark.slow)], ids=["150-scenes", "500-scenes"])
-def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds, max_misses, worst):
+@pytest.mark.parametrize("seeds", [range(150), pytest.param(range(150, 1150), marks=pytest.mark.slow)],
+                         ids=["150-scenes", "1000-scenes"])
+def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds):
     """Random scenes (up to 160 modes, with and without residual flexibility) at tol 1e-4, 1e-6, 1e-8 against the
-    same model at tol 1e-12. Measured misses (docs/reference.md), reported as misses and guarded here against
-    regressions: seeds 0-149 (437 comparisons): 2, 1.17x and 1.21x, modal targets with strongly coupled light
-    modes (s > 3, beyond the single-mode calibration of the unresolved-mode table) at tol 1e-8; seeds 150-649
-    (1464 comparisons): 3, at most 1.69x (8-mode plate + residual at tol 1e-4, pre-asymptotic step ratio).
-    The median of reported / real is below 10 (6.6 measured)."""
+    same model at tol 1e-12: the real error never exceeds the reported uncertainty (measured: 0 of 11,648
+    comparisons on seeds 0-3999; before the smallest-step, sign-change and light-mode rules of docs/reference.md
+    5 of 1,901 were above, 1.08-1.69x). The median of reported / real is below 10 (6.8 measured)."""
     ratios, misses = [], []
     for seed in seeds:
         scene, md, n, residual = _modes_case(seed)
@@ -129,7 +125,7 @@ def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds, max_miss
                 misses.append((float(np.max(err / u)), seed, scene.target.kind, n, residual, tol))
             ratios.append(float(np.max(u / x) / np.max(err / tr)))
     assert len(ratios) > 2.5 * len(seeds)
-    assert len(misses) <= max_misses and max([m[0] for m in misses], default=0.0) <= worst, misses
+    assert not misses, misses
     assert np.median(ratios) < 10.0
 
 
@@ -178,15 +174,16 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 
 #: catalogue and tests' scenes whose reported uncertainty at tol 1e-6 is more than 10x the real error (measured
 #: ratio x 1.5; docs/reference.md): automatic-mode beams, where the unresolved-mode bound (a sum of per-mode worst
-#: cases) dominates, and the stubby Timoshenko beam, whose truncation ratio is trusted to 2x per doubling only.
+#: cases) dominates, and the Timoshenko beams, whose truncation ratio is trusted to 2x per doubling only.
 #: Asserted honest and not looser than this.
-TEN_X_MISSES = {"beam_cantilever_tip": 20, "beam_ss_stubby_timoshenko": 110, "heavy_ball_slender_beam": 60,
-                "cantilever_titanium": 26, "cc_aluminium_0p3": 24, "heavy_wc_slender": 26, "stubby_steel": 21,
-                "rand_wc_on_steel_cantilever": 50, "stubby_steel_timoshenko": 18, "heavy_wc_slender_timoshenko": 260,
-                "al_cantilever_glass": 37, "steel_cc_pmma_ball": 46, "ti_ss_steel_heavy": 40}
+TEN_X_MISSES = {"beam_cantilever_tip": 21, "beam_ss_stubby_timoshenko": 107, "heavy_ball_slender_beam": 26,
+                "cantilever_titanium": 26, "cc_aluminium_0p3": 29, "heavy_wc_slender": 49, "stubby_steel": 15,
+                "stubby_steel_timoshenko": 38, "heavy_wc_slender_timoshenko": 250, "al_cantilever_glass": 36,
+                "steel_cc_pmma_ball": 45, "ti_ss_steel_heavy": 24, "glass_on_pmma": 40, "rand_glass_on_pmma_ss": 20,
+                "rand_wc_on_pmma_cc": 27}
 #: measured within 10x at tol 1e-6 (catalogue scenes added later are held to 10x too; scenes added to tests/unseen
 #: later are checked for honesty only until measured and listed here or above)
-WITHIN_10X = ("rand_glass_on_pmma_ss", "rand_wc_on_pmma_cc", "glass_on_pmma")
+WITHIN_10X = ("rand_wc_on_steel_cantilever",)
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]

@@ -52,8 +52,9 @@ def test_fakes_always_run_every_plate_check():
     """No silent skip without engines: the explicit fake passes every plate check (only the beam check
     is outside a closed-form plate's reach)."""
     out = run_checks(load_adapter(FAKES[1]))
-    assert all(v == "ok" for k, v in out.items() if k != "check_beam_model"), out
+    assert all(v == "ok" for k, v in out.items() if k not in ("check_beam_model", "check_retry_softer")), out
     assert out["check_beam_model"].startswith("skipped")
+    assert out["check_retry_softer"].startswith("skipped: no retry hook")   # the hook is optional
 
 
 # ---------------------------------------------------------------------------- the base's statuses
@@ -199,3 +200,95 @@ def test_contacts_from_series_without_engines():
     assert c[0].t_end - c[0].t_start == pytest.approx(1.0, abs=1e-9)
     assert c[0].f_max == pytest.approx(10.0, rel=1e-6) and c[0].delta_max == pytest.approx(1.0, rel=1e-6)
     assert c[1].t_start == pytest.approx(2.0, abs=1e-3)
+
+
+# ---------------------------------------------------------------------------- retry with a softer model (base hook)
+
+from impactval.engines.base import Plan, Softer  # noqa: E402
+from impactval.engines.fake_ import HertzSpringAdapter  # noqa: E402
+
+
+class StiffGrows(HertzSpringAdapter):
+    """The closed form, but a contact stiffer than `growth_free` pumps energy in proportion to the excess (a stand-in
+    for float32 growth of a stiff explicit model); `retry` halves stiffness_scale (softer: a higher predicted limit)."""
+
+    name = "stiff-grows"
+    growth_free = 1.0
+
+    def plan(self, scene, settings) -> Plan:
+        return Plan(1.0 / math.sqrt(settings.option("stiffness_scale", 1.0)), "closed form, scaled", 0.0)
+
+    def energy(self, model):
+        excess = max(model.law.coefficient / self._alpha - self.growth_free, 0.0)
+        return super().energy(model) * (1.0 + 0.1 * excess * min(model.t / model.t_contact, 1.0))
+
+    def build(self, scene, settings):
+        self._alpha = scene.alpha
+        return super().build(scene, settings)
+
+    def retry(self, scene, settings, result):
+        from dataclasses import replace
+
+        if result.status != Status.UNSTABLE or not result.message.startswith("energy grew"):
+            return None
+        scale = settings.option("stiffness_scale", 1.0)
+        return Softer(replace(settings, options=replace(settings.options, stiffness_scale=scale / 2)),
+                      f"stiffness x{scale:g} -> x{scale / 2:g}")
+
+
+@pytest.mark.parametrize("scale, retries, status", [(1.0, 0, Status.OK), (3.0, 2, Status.OK), (64.0, 3, Status.UNSTABLE)])
+def test_base_retries_with_a_softer_model(plate_scene, scale, retries, status):
+    """The base reruns an energy failure with `retry`'s softer model, at most max_retries (3) times: the row is the
+    first attempt that is not unstable (3 -> 1.5 -> 0.75: 2 retries, ok at x0.75, its t_m the closed form of that
+    stiffness) or the last (64 -> 8: still unstable), with the retries, each model and a validity note."""
+    from impactval.reference.hertz import plate_impact
+
+    r = StiffGrows().run(plate_scene, EngineSettings(options=(("stiffness_scale", scale),)))
+    assert r.status == status, r.message
+    if not retries:
+        assert "retries" not in r.diagnostics and not r.validity
+        return
+    used = scale / 2**retries
+    assert r.diagnostics["retries"] == retries
+    assert r.diagnostics["retry_models"][-1] == f"stiffness x{2 * used:g} -> x{used:g}"
+    assert r.diagnostics["retry_first_failure"].startswith("energy grew")
+    assert r.settings["options"]["stiffness_scale"] == used
+    note, = [v for v in r.validity if "softer model" in v]
+    assert f"retried {retries}x" in note and f": {status.value}," in note
+    if status == Status.OK:
+        want = plate_impact(plate_scene.ball.mass, plate_scene.alpha * used, plate_scene.ball.velocity).t_m
+        assert abs(r.t_m / want - 1) <= 1e-3
+
+
+def test_dt_refusal_and_other_failures_are_not_retried(plate_scene):
+    """A dt refused above the predicted limit is the user's step, never retried; an adapter's retry of None keeps
+    the row (the base's default)."""
+    from impactval.engines.fake_ import ExplicitHertzSpringAdapter
+
+    class Retries(ExplicitHertzSpringAdapter):
+        calls = 0
+
+        def retry(self, scene, settings, result):
+            Retries.calls += 1
+            return None
+
+    r = Retries().run(plate_scene, EngineSettings(dt=1e-2))
+    assert r.status == Status.UNSTABLE and "refused before stepping" in r.message and Retries.calls == 0
+    r = execute_job("fake_engines:EnergyGrows", plate_scene, EngineSettings())
+    assert r.status == Status.UNSTABLE and "retries" not in r.diagnostics
+
+
+def test_conformance_retry_check_catches_a_stiffer_retry():
+    """check_retry_softer fails an adapter whose 'softer' model predicts a lower limit, and passes StiffGrows."""
+    from impactval.engines.conformance import check_retry_softer
+
+    check_retry_softer(StiffGrows())
+
+    class Stiffer(StiffGrows):
+        def retry(self, scene, settings, result):
+            from dataclasses import replace
+
+            return Softer(replace(settings, options=replace(settings.options, stiffness_scale=2.0)), "stiffer")
+
+    with pytest.raises(AssertionError):
+        check_retry_softer(Stiffer())
