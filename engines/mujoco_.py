@@ -468,6 +468,7 @@ class MujocoAdapter(SteppingAdapter):
         om, what = omega_max(scene, law, chain)
         integ = settings.integrator or INTEGRATORS[0]
         diag: dict = {}
+        notes: list[str] = []
         err = math.nan
         if chain is not None:
             me = model_error(scene, chain)
@@ -475,11 +476,9 @@ class MujocoAdapter(SteppingAdapter):
             diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m,
                         rotary_inertia=chain.rotary)
             notes = chain_notes(scene, chain, me, float(settings.option("chain_tol", DEFAULT_CHAIN_TOL)))
-            if notes:
-                diag["validity"] = notes
         elif scene.target.kind in ("rigid-plate", "ball", "modal"):
             err = 0.0           # a modal target is its modes exactly: one oscillator per mode
-        return Plan(STABILITY[integ] / om, f"{integ}, {what}", err, diag)
+        return Plan(STABILITY[integ] / om, f"{integ}, {what}", err, diag, tuple(notes))
 
     # ------------------------------------------------------------------ model
     def build(self, scene, settings: EngineSettings) -> _Run:

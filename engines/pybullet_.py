@@ -243,6 +243,7 @@ class PybulletAdapter(SteppingAdapter):
             law = ContactLaw.hertz(scene.alpha)
         om, what = omega_max(scene, law, chain)
         diag: dict = {"omega_max": om}
+        notes: list[str] = []
         err = 0.0
         if chain is not None:
             me = model_error(scene, chain)
@@ -251,9 +252,7 @@ class PybulletAdapter(SteppingAdapter):
             tol = float(settings.option("chain_tol", DEFAULT_CHAIN_TOL))
             notes = chain_notes(scene, chain, me, tol,
                                 min(most_links(scene.target), MAX_SIZED_LINKS) if settings.segments is None else None)
-            if notes:
-                diag["validity"] = notes
-        return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag)
+        return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag, tuple(notes))
 
     # ------------------------------------------------------------------ the job
     def build(self, scene, settings: EngineSettings) -> "_Run":

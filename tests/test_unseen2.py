@@ -85,11 +85,11 @@ def test_pybullet_notes_name_the_real_reason():
     from impactval.engines.pybullet_ import PybulletAdapter
 
     soft = PybulletAdapter().plan(_scene("cc_soft_polymer_timoshenko"), EngineSettings())
-    notes = " ".join(soft.diagnostics["validity"])
+    notes = " ".join(soft.validity)
     assert "Timoshenko scene" in notes and "capped" not in notes       # 35 links: not the link cap
     slender = PybulletAdapter().plan(_scene("cantilever_ti_long_slender"), EngineSettings())
     assert slender.model_error > BAR                                    # 114 links cannot reach the bar here
-    assert "chain capped at 114 links" in " ".join(slender.diagnostics["validity"])
+    assert "chain capped at 114 links" in " ".join(slender.validity)
 
 
 def test_an_error_beyond_the_model_error_is_never_silent():
