@@ -88,12 +88,22 @@ def at_speed(scene, speed: float):
     return dataclasses.replace(scene, name=f"{scene.name}[v={speed:g}]", ball=ball)
 
 
+def contact_mass(scene) -> float:
+    """The mass the contact spring works against [kg]: the ball's, or for a second ball the reduced mass
+    m1 m2 / (m1 + m2) (the two-ball contact is the same as that mass on a rigid plate)."""
+    if scene.target.kind == "ball":
+        from impactval.reference.spheres import reduced_mass
+
+        return reduced_mass(scene)
+    return scene.ball.mass
+
+
 def default_dt(scene, speeds: Sequence[float]) -> float:
     """A fixed engine step [s]: the shortest rigid-plate Hertz contact time over `speeds` / 2000,
     rounded down to a 1-2-5 value (one dt for every speed, so an emitted ERP/CFM pair stays valid)."""
     from impactval.engines.base import nice_step
 
-    t_short = min(plate_impact(scene.ball.mass, scene.alpha, v).t_m for v in speeds)
+    t_short = min(plate_impact(contact_mass(scene), scene.alpha, v).t_m for v in speeds)
     return nice_step(t_short / STEPS_PER_SHORTEST_CONTACT)
 
 
@@ -467,10 +477,14 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
     if engine == "pybullet" and contact == "native-hertz":
         raise ImpactvalError("tune: pybullet has no pasteable Hertz law (its native-hertz mode updates the CFM every "
                              "step from the penetration); use --contact native.")
+    if scene.target.kind == "ball" and scene.target.velocity != 0.0:
+        raise ImpactvalError(f"tune: target.velocity is {scene.target.velocity:g} m/s: --speeds are the first ball's "
+                             f"approach speeds onto a second ball at rest; set target.velocity = 0 and give the "
+                             f"relative speeds (v1 + v2) in --speeds (the contact depends on those only).")
     speeds = [float(v) for v in speeds]
     dt = float(dt) if dt is not None else default_dt(scene, speeds)
     targets = hertz_targets(scene, speeds, tol)
-    mass, alpha = scene.ball.mass, scene.alpha
+    mass, alpha = contact_mass(scene), scene.alpha
     v_mid = middle_speed(speeds)
     k_comp = linear_compromise(mass, targets)
     closed: dict[str, Any] = {

@@ -369,3 +369,31 @@ def test_tune_bad_input_is_one_line_exit_2():
         assert proc.returncode == 2, (args, proc.stderr)
         assert proc.stderr.strip().splitlines()[-1].startswith("impactval: error:")
         assert "Traceback" not in proc.stderr
+
+
+def test_ball_on_ball_tunes_the_equivalent_plate_contact():
+    """A second ball at rest: the springs tune derives must be those of the equivalent ball (reduced mass, same
+    alpha) on a rigid plate, whose contact is the same relative motion (reference.spheres); the ball's own mass
+    gave springs off by m1/m* (the red team's finding: restitution above 1 with a moving second ball)."""
+    from impactval.reference.spheres import equivalent_plate_scene
+
+    scene = impactval.load_scene("ball_ball_steel_on_aluminium")
+    plate = equivalent_plate_scene(scene)
+    speeds = [0.5, 1.0, 2.0]
+    on_ball = [T.k_matching(T.contact_mass(scene), t.t_m, t.f_m, t.speed) for t in T.hertz_targets(scene, speeds)]
+    on_plate = [T.k_matching(plate.ball.mass, t.t_m, t.f_m, t.speed) for t in T.hertz_targets(plate, speeds)]
+    for a, b in zip(on_ball, on_plate):
+        for key in a:
+            assert a[key] == pytest.approx(b[key], rel=1e-6), key
+    assert T.default_dt(scene, speeds) == T.default_dt(plate, speeds)
+
+
+def test_tune_refuses_a_moving_second_ball(tmp_path):
+    from impactval.scenarios.scene import scene_from_dict
+
+    scene = scene_from_dict({"name": "moving", "ball": {"radius": 0.005, "velocity": 3.0, "material": "glass"},
+                             "target": {"kind": "ball", "radius": 0.02, "material": "tungsten-carbide",
+                                        "velocity": 1.5}})
+    with pytest.raises(ImpactvalError, match="target.velocity") as exc:
+        T.tune("mujoco", scene, [0.5, 1.0], store=str(tmp_path / "t.sqlite"))
+    assert "\n" not in str(exc.value)
