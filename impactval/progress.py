@@ -39,6 +39,12 @@ class PlainProgress:
             self.running[label] = now
             self._next_beat[label] = now + self.heartbeat_s
 
+    def stopped(self, label: str) -> None:
+        """The job's engine work ended (its row may still wait for the reference): no longer 'running'."""
+        with self._lock:
+            self.running.pop(label, None)
+            self._next_beat.pop(label, None)
+
     def tick(self) -> None:
         """Called by the runner about twice a second: heartbeat lines for long jobs."""
         now = time.monotonic()

@@ -378,9 +378,15 @@ def theory_gap(scene, ref: ImpactResult, tol: float) -> TheoryGap:
     return TheoryGap(other, gap, freqs)
 
 
-def _notify_start(callback, key: str, fn, *args):
+def _notify_start(callback, key: str, fn, *args, on_end=None):
+    """Run fn(*args) in this pool thread, telling `callback` when it starts and `on_end` when it ends (the job's
+    own time: the main thread may still be busy with an earlier row's reference solve)."""
     callback(key)
-    return fn(*args)
+    try:
+        return fn(*args)
+    finally:
+        if on_end is not None:
+            on_end(key)
 
 
 class _Signals:
@@ -505,15 +511,23 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
                     pool = ex.local_executor(workers)
                 t_start: dict[str, float] = {}
 
+                t_end: dict[str, float] = {}
+
                 def started(k: str) -> None:
                     t_start[k] = time.monotonic()
                     if progress is not None:
                         progress.started(todo[k].label())
 
+                def ended(k: str) -> None:
+                    t_end[k] = time.monotonic()
+                    if progress is not None and hasattr(progress, "stopped"):
+                        progress.stopped(todo[k].label())
+
                 # grouped by engine: a worker thread keeps serving the engine it has loaded
                 for k, job in sorted(remote.items(), key=lambda kv: kv[1].spec):
                     if scheduler is None:       # a local thread can say when the job starts
-                        fut = pool.submit(_notify_start, started, k, ex.run_job, job.spec, job.scene, job.settings)
+                        fut = pool.submit(_notify_start, started, k, ex.run_job, job.spec, job.scene, job.settings,
+                                          on_end=ended)
                     else:
                         started(k)
                         fut = pool.submit(ex.run_job, job.spec, job.scene, job.settings)
@@ -532,7 +546,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
                             res = ImpactResult.failed(job.scene.name, job.spec, Status.CRASHED,
                                                       f"executor lost the job: {type(err).__name__}: {err}",
                                                       settings=job.settings.as_dict())
-                        finish(k, res, time.monotonic() - t_start.get(k, time.monotonic()))
+                        now = time.monotonic()
+                        finish(k, res, t_end.get(k, now) - t_start.get(k, now))
             status = RunStatus.FINISHED
     except (_Stop, KeyboardInterrupt) as stop:
         signum = getattr(stop, "signum", signal.SIGINT)

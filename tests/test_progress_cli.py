@@ -80,3 +80,27 @@ def test_plain_progress_says_a_long_job_is_alive():
     time.sleep(0.06)
     p.tick()
     assert buf.getvalue().count("still running") == 1   # finished: no more heartbeats
+
+
+def test_a_job_time_is_its_own_not_the_wait_for_the_main_thread(tmp_path):
+    """A row's seconds are the job's own: the main thread may still be busy with an earlier row (its reference
+    solve; here a slow `on_row`) while the pool thread has already run the next job. The red team saw ~300 s for
+    every job of a --jobs 1 run whose first row waited on a long reference solve, and finished jobs listed as running."""
+    from impactval.runner import run
+
+    buf = io.StringIO()
+    progress = PlainProgress(buf, heartbeat_s=0.2)
+    calls = []
+
+    def slow_row(row):
+        calls.append(row)
+        if len(calls) == 1:
+            time.sleep(1.5)
+
+    run(["plate_steel"], ["fake_engines:Raises"], dt=[1e-6, 5e-7], workers=1, progress=progress, on_row=slow_row,
+        store=str(tmp_path / "s.sqlite"))
+    lines = [ln for ln in buf.getvalue().splitlines() if ln.startswith("[")]
+    assert len(lines) == 2, buf.getvalue()
+    second = float(lines[1].rsplit("(", 1)[1].split()[0])
+    assert second < 1.0, lines                      # the job itself takes well under a second
+    assert "still running" not in buf.getvalue()    # nothing ran for 0.2 s after its engine work ended
