@@ -64,8 +64,17 @@ class HenckyChain:
     height: float
     width: float
     rotary: str
+    shear_stiffness: float = 0.0   # kappa G A / l [N/m] of a node's transverse slide (0: no slides, Euler-Bernoulli)
+    support_shear_stiffness: float = 0.0   # 2 kappa G A / l [N/m]: a supported end's slide (half a segment)
+
+    @property
+    def shear(self) -> bool:
+        """True for the shear-deformable (Timoshenko) chain: a transverse slide at every node."""
+        return self.shear_stiffness > 0.0
 
     def linear(self) -> ChainLinear:
+        if self.shear:
+            return self._shear_linear()
         n, l = self.n, self.segment_length
         nodes = n + 1
         m = np.zeros((nodes, nodes))
@@ -89,6 +98,46 @@ class HenckyChain:
         row[self.hit_segment], row[self.hit_segment + 1] = 1.0 - xi, xi
         keep = np.arange(1, nodes if self.support == "cantilever" else nodes - 1)
         return ChainLinear(m[np.ix_(keep, keep)], k[np.ix_(keep, keep)], row[keep])
+
+    def _shear_linear(self) -> ChainLinear:
+        """The Timoshenko chain in the segments' centre deflections u_i and rotations psi_i (order u_0, psi_0,
+        u_1, ...): node j's slide opens by s_j = (u_j - l/2 psi_j) - (u_{j-1} + l/2 psi_{j-1}) [m] against
+        kappa G A / l, its hinge turns by psi_j - psi_{j-1} against EI/l; a supported end's point (x = 0, and
+        x = L unless a cantilever) is held at w = 0 through a slide of 2 kappa G A / l, a clamped end's
+        segment rotation through 2EI/l; every mass term is diagonal (segment mass, rotary inertia)."""
+        n, l = self.n, self.segment_length
+        dof = 2 * n
+        m = np.diag(np.tile([self.segment_mass, self.rotary_inertia], n))
+        k = np.zeros((dof, dof))
+
+        def left(i):                 # w at segment i's left end
+            r = np.zeros(dof)
+            r[2 * i], r[2 * i + 1] = 1.0, -l / 2
+            return r
+
+        def right(i):
+            r = np.zeros(dof)
+            r[2 * i], r[2 * i + 1] = 1.0, l / 2
+            return r
+
+        def psi(i):
+            r = np.zeros(dof)
+            r[2 * i + 1] = 1.0
+            return r
+
+        for j in range(1, n):
+            s, d = left(j) - right(j - 1), psi(j) - psi(j - 1)
+            k += self.shear_stiffness * np.outer(s, s) + self.hinge_stiffness * np.outer(d, d)
+        k += self.support_shear_stiffness * np.outer(left(0), left(0))
+        if self.support != "cantilever":
+            k += self.support_shear_stiffness * np.outer(right(n - 1), right(n - 1))
+        if self.support in ("clamped-clamped", "cantilever"):
+            k += self.clamp_stiffness * np.outer(psi(0), psi(0))
+        if self.support == "clamped-clamped":
+            k += self.clamp_stiffness * np.outer(psi(n - 1), psi(n - 1))
+        row = np.zeros(dof)
+        row[2 * self.hit_segment], row[2 * self.hit_segment + 1] = 1.0, self.hit_offset - l / 2
+        return ChainLinear(m, k, row)
 
     def modes(self):
         """The chain's modes seen from the contact point: `reference.beams.Modes` (omega [rad/s],
@@ -124,8 +173,10 @@ class HenckyChain:
         return float(math.sqrt(max(float(linalg.eigh(k, m, eigvals_only=True)[-1]), 0.0)))
 
 
-def hencky_chain(beam, n: int, rotary: str = "none") -> HenckyChain:
-    """The N-segment Hencky chain of `beam` (a scenarios.scene.Beam); see the module docstring."""
+def hencky_chain(beam, n: int, rotary: str = "none", shear: bool = False) -> HenckyChain:
+    """The N-segment Hencky chain of `beam` (a scenarios.scene.Beam); see the module docstring. `shear=True`:
+    the Timoshenko chain (a transverse slide of kappa G A / l at every node, 2 kappa G A / l at a supported
+    end, the section's rotary inertia: `rotary` becomes "section")."""
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
         raise ValueError(f"a Hencky chain needs at least 2 segments, got {n!r}")
     if rotary not in ("none", "section"):
@@ -134,10 +185,13 @@ def hencky_chain(beam, n: int, rotary: str = "none") -> HenckyChain:
     l = beam.length / n
     ei = mat.young * beam.second_moment
     m_seg = mat.density * beam.area * l
+    if shear:
+        rotary = "section"
     j = m_seg * (l * l + (beam.height**2 if rotary == "section" else 0.0)) / 12.0
     hit = min(int(beam.impact_x / l), n - 1)
+    k_shear = beam.shear_coefficient * beam.shear_modulus * beam.area / l if shear else 0.0
     return HenckyChain(n, beam.length, l, m_seg, j, ei / l, 2.0 * ei / l, beam.support, hit,
-                       beam.impact_x - hit * l, beam.height, beam.width, rotary)
+                       beam.impact_x - hit * l, beam.height, beam.width, rotary, k_shear, 2.0 * k_shear)
 
 
 @dataclass(frozen=True)
@@ -179,14 +233,14 @@ def chain_notes(scene, chain: HenckyChain, me: ChainModelError, tol: float, capp
     with `capped_at` (the engine's most links), a chain whose own Euler-Bernoulli error stays above `tol`."""
     notes = []
     eb = euler_bernoulli(scene)
-    own = me if eb is scene else model_error(eb, chain)
-    if eb is not scene and me.largest > tol:
+    own = me if (eb is scene or chain.shear) else model_error(eb, chain)
+    if eb is not scene and not chain.shear and me.largest > tol:
         notes.append(f"Euler-Bernoulli chain on a Timoshenko scene: its model error {100 * me.largest:.2f} % is the "
                      f"beam-theory difference (the chain itself is {100 * own.largest:.2f} % off Euler-Bernoulli); "
                      "compare it on theory = \"euler-bernoulli\" or use exudyn (solid beam, shear-deformable)")
     if capped_at is not None and own.largest > tol and chain.n >= capped_at - 12:
         notes.append(f"chain capped at {chain.n} links (the engine's most links: {capped_at}): its own "
-                     f"Euler-Bernoulli model error is {100 * own.largest:.2f} %, above chain_tol {100 * tol:g} %")
+                     f"{'Timoshenko' if chain.shear else 'Euler-Bernoulli'} model error is {100 * own.largest:.2f} %, above chain_tol {100 * tol:g} %")
     return notes
 
 
@@ -208,50 +262,68 @@ class ChainSizing:
     model_error: ChainModelError
 
 
+def timoshenko_frequencies(beam, n: int) -> np.ndarray:
+    """The n lowest Timoshenko frequencies [rad/s] of `beam` with a transverse deflection (reference/timoshenko.py)."""
+    from impactval.reference import timoshenko as tim
+
+    return np.asarray(tim.timoshenko_modes(tim.Section.of(beam), beam.support, n, beam.impact_x)[0])
+
+
 def _freq_error(beam, chain: HenckyChain, count: int) -> float:
     if count <= 0:
         return 0.0
+    if chain.shear:   # each Timoshenko frequency against the nearest chain frequency (the chain also has modes
+        ch = chain.frequencies()  # without deflection, e.g. the simply supported pure-shear rotation at the cut-off)
+        cont = timoshenko_frequencies(beam, count)
+        near = ch[np.argmin(np.abs(ch[None, :] - cont[:, None]), axis=1)]
+        return float(np.max(np.abs(near / cont - 1.0)))
     ch = chain.frequencies()[:count]
     cont = continuum_frequencies(beam, len(ch))
     return float(np.max(np.abs(ch / cont - 1.0)))
 
 
 def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", max_segments: int = 400,
-                 adjust=None) -> ChainSizing:
+                 adjust=None, shear: bool = False) -> ChainSizing:
     """Segments for `scene`'s beam so that the modes that matter are within `tol` in frequency and
     the chain's model error on t_m, f_m, delta_m is within `tol` (see the module docstring).
-    `adjust(n) -> n` lets an engine move N (e.g. PyBullet: impact point near a segment centre)."""
+    `adjust(n) -> n` lets an engine move N (e.g. PyBullet: impact point near a segment centre).
+    `shear=True` (a Timoshenko scene only): the Timoshenko chain, sized against Timoshenko theory."""
     from impactval.reference.modechoice import required_modes
 
     actual = scene
-    scene = euler_bernoulli(scene)  # a chain discretises Euler-Bernoulli: size it against that theory
+    shear = bool(shear) and euler_bernoulli(scene) is not scene
+    if not shear:
+        scene = euler_bernoulli(scene)  # a Hencky chain discretises Euler-Bernoulli: size it against that theory
     beam = scene.target
+
+    def chain_of(b, k: int, r: str) -> HenckyChain:
+        return hencky_chain(b, k, r, shear=shear)
     adjust = adjust or (lambda n: n)
     count = required_modes(scene, tol).count
     n = adjust(max(MIN_SEGMENTS, 4 * count))
     for _ in range(6):            # frequency criterion: error ~ (j/N)^2
-        err = _freq_error(beam, hencky_chain(beam, n, rotary), count)
+        err = _freq_error(beam, chain_of(beam, n, rotary), count)
         if err <= tol or n >= max_segments:
             break
         n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(err / tol) * 1.05))))
-    me = model_error(scene, hencky_chain(beam, n, rotary))
+    me = model_error(scene, chain_of(beam, n, rotary))
     for _ in range(4):            # the metric criterion, the same 1/N^2 law
         if me.largest <= tol or n >= max_segments:
             break
         n = adjust(min(max_segments, int(math.ceil(n * math.sqrt(me.largest / tol) * 1.05))))
-        me = model_error(scene, hencky_chain(beam, n, rotary))
+        me = model_error(scene, chain_of(beam, n, rotary))
     if me.largest > tol:          # capped: the error depends on where the impact point sits in its segment,
         best = (me.largest, n, me)  # so take the N near the cap with the smallest model error, among the
         # N the engine's `adjust` accepts (PyBullet: impact point near its segment's centre, which its native
         # sphere-box contact needs: off-centre, the hit link tilts under the ball, native t_m +3.8 % measured)
         for m in sorted({adjust(k) for k in range(max(MIN_SEGMENTS, max_segments - 12), max_segments + 1)}):
-            e = model_error(scene, hencky_chain(beam, m, rotary))
+            e = model_error(scene, chain_of(beam, m, rotary))
             if e.largest < best[0]:
                 best = (e.largest, m, e)
         _, n, me = best
     if actual is not scene:       # reported against the scene's own theory: discretisation + structure theory
-        me = model_error(actual, hencky_chain(beam, n, rotary))
-    return ChainSizing(n, count, _freq_error(beam, hencky_chain(beam, n, rotary), count), me)
+        me = model_error(actual, chain_of(beam, n, rotary))
+    return ChainSizing(n, count, _freq_error(beam, chain_of(beam, n, rotary), count), me)
 
 
 def euler_bernoulli(scene):

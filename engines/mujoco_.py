@@ -116,12 +116,24 @@ def default_segments(scene, settings: EngineSettings | None = None) -> int:
     option chain_tol, with the impact point centred on a segment."""
     tol = settings.option("chain_tol", DEFAULT_CHAIN_TOL) if settings is not None else DEFAULT_CHAIN_TOL
     rotary = settings.option("rotary_inertia", "none") if settings is not None else "none"
-    return _sized(scene, float(tol), rotary).n
+    return _sized(scene, float(tol), rotary, _shear(scene, settings)).n
+
+
+def _shear(scene, settings: EngineSettings | None) -> bool:
+    """True when the job builds the Timoshenko chain: a Timoshenko beam with the serial chain (chain_root 'end');
+    the two-branch trees ('hit', 'middle') build the Euler-Bernoulli chain (the row notes it)."""
+    root = settings.option("chain_root", "end") if settings is not None else "end"
+    return getattr(scene.target, "theory", "euler-bernoulli") == "timoshenko" and root == "end"
+
+
+def _chain_for(scene, settings: EngineSettings) -> HenckyChain:
+    n = settings.segments or default_segments(scene, settings)
+    return hencky_chain(scene.target, n, settings.option("rotary_inertia", "none"), shear=_shear(scene, settings))
 
 
 @lru_cache(maxsize=16)
-def _sized(scene, tol: float, rotary: str):
-    return segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS))
+def _sized(scene, tol: float, rotary: str, shear: bool = False):
+    return segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS), shear=shear)
 def _fmt(x: float) -> str:
     return f"{x:.17g}"
 
@@ -246,9 +258,13 @@ def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, suppo
         if i == 0:
             if support in ("simply-supported", "clamped-clamped"):
                 s.append('<joint name="root_x" type="slide" axis="1 0 0"/>')
+            if chain.shear:      # the supported end's shear: a transverse slide of 2 kappa G A / l
+                s.append(f'<joint name="s0" type="slide" axis="0 0 1" stiffness="{_fmt(chain.support_shear_stiffness)}"/>')
             k_root = 0.0 if support == "simply-supported" else k_clamp
             s.append(f'<joint name="h0" type="hinge" axis="0 1 0" stiffness="{_fmt(k_root)}"/>')
         else:
+            if chain.shear:      # node i's shear: a slide along the previous segment's transverse axis
+                s.append(f'<joint name="s{i}" type="slide" axis="0 0 1" stiffness="{_fmt(chain.shear_stiffness)}"/>')
             s.append(f'<joint name="h{i}" type="hinge" axis="0 1 0" stiffness="{_fmt(k_hinge)}"/>')
         s.append(f'<inertial pos="{_vec(l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy, izz)}"/>')
         if i == hit:
@@ -257,12 +273,20 @@ def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, suppo
             if contact_geom:
                 s.append(f'<geom name="target" type="box" pos="{_vec(off, 0, 0)}" '
                          f'size="{_vec(l / 2, w / 2, h / 2)}" contype="0" conaffinity="0" mass="0"/>')
+        if chain.shear and i == n - 1 and support != "cantilever":
+            # the supported end at x = L: a small body on a transverse slide of 2 kappa G A / l, pinned below;
+            # half a segment's mass (pinned, it hardly moves), the rotary inertia of a point
+            tiny = 1e-6 * iyy
+            s.append(f'<body name="end" pos="{_vec(l, 0, 0)}"><joint name="s{n}" type="slide" axis="0 0 1" '
+                     f'stiffness="{_fmt(chain.support_shear_stiffness)}"/><inertial pos="0 0 0" '
+                     f'mass="{_fmt(m_seg / 2)}" diaginertia="{_vec(tiny, tiny, tiny)}"/></body>')
         parts.append("".join(s))
         closes.append("</body>")
     chain_xml = "".join(parts) + "".join(closes)
     extra = ""
+    pinned, anchor = (("end", _vec(0, 0, 0)) if chain.shear else (f"seg{n - 1}", _vec(l, 0, 0)))
     if support in ("simply-supported", "clamped-clamped"):
-        extra += f'<equality><connect name="pin" body1="seg{n - 1}" anchor="{_vec(l, 0, 0)}"/></equality>'
+        extra += f'<equality><connect name="pin" body1="{pinned}" anchor="{anchor}"/></equality>'
     if support == "clamped-clamped":
         joints = "".join(f'<joint joint="h{i}" coef="1"/>' for i in range(n))
         extra += f'<tendon><fixed name="clamp_end" stiffness="{_fmt(k_clamp)}" springlength="0">{joints}</fixed></tendon>'
@@ -321,7 +345,7 @@ def build_xml(scene, settings: EngineSettings, chain: HenckyChain | None = None,
                  '<site name="hit" pos="0 0 0" size="0.001"/>')
     elif target.kind == "beam":
         if chain is None:
-            chain = hencky_chain(target, default_segments(scene, settings), settings.option("rotary_inertia", "none"))
+            chain = _chain_for(scene, settings)
         world, extra = _beam_xml(target, chain, lay, native, settings.option("chain_root", "end"))
     elif target.kind == "ball":
         world = _second_ball_xml(target, lay)
@@ -447,8 +471,7 @@ class MujocoAdapter(SteppingAdapter):
         """The Hencky chain this job builds (None for a plate or modal target)."""
         if scene.target.kind != "beam":
             return None
-        n = settings.segments or default_segments(scene, settings)
-        return hencky_chain(scene.target, n, settings.option("rotary_inertia", "none"))
+        return _chain_for(scene, settings)
 
     def contact_law(self, scene, settings: EngineSettings):
 
