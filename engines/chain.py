@@ -266,7 +266,10 @@ def timoshenko_frequencies(beam, n: int) -> np.ndarray:
     """The n lowest Timoshenko frequencies [rad/s] of `beam` with a transverse deflection (reference/timoshenko.py)."""
     from impactval.reference import timoshenko as tim
 
-    return np.asarray(tim.timoshenko_modes(tim.Section.of(beam), beam.support, n, beam.impact_x)[0])
+    sec = tim.Section.of(beam)
+    if beam.support == "simply-supported":
+        return np.asarray(tim.ss_frequencies(sec, n)[0])
+    return np.asarray(tim.clamped_frequencies(sec, beam.support, n))    # frequencies only: no mode shapes
 
 
 def _freq_error(beam, chain: HenckyChain, count: int) -> float:
@@ -299,7 +302,9 @@ def segments_for(scene, tol: float = DEFAULT_CHAIN_TOL, rotary: str = "none", ma
     def chain_of(b, k: int, r: str) -> HenckyChain:
         return hencky_chain(b, k, r, shear=shear)
     adjust = adjust or (lambda n: n)
-    count = required_modes(scene, tol).count
+    # the modes that matter, counted on Euler-Bernoulli theory also for the Timoshenko chain: Timoshenko's count
+    # needs its mode shapes (minutes on a stubby cantilever); the model-error criterion below is the guarantee
+    count = required_modes(euler_bernoulli(scene), tol).count
     n = adjust(max(MIN_SEGMENTS, 4 * count))
     for _ in range(6):            # frequency criterion: error ~ (j/N)^2
         err = _freq_error(beam, chain_of(beam, n, rotary), count)

@@ -62,8 +62,7 @@ def test_chain_static_flexibility_is_timoshenkos(support):
     assert abs(flexibility(hencky_chain(beam, 81)) / exact - 1.0) > 0.02
 
 
-@pytest.mark.parametrize("support", ["clamped-clamped", "simply-supported",
-                                     pytest.param("cantilever", marks=pytest.mark.slow)])   # sizing ~250 s loaded
+@pytest.mark.parametrize("support", sorted(SCENES))
 def test_mujoco_linearisation_is_the_chain_and_within_its_frequency_error(support):
     """MuJoCo's own linearisation (mjd_transitionFD) of the built model has the linear chain's frequencies
     (soft support constraints: within 0.05 %), and at the sized N the deflection modes that matter are within
@@ -124,7 +123,6 @@ def test_timoshenko_scene_at_defaults_meets_the_bar_as_predicted():
         assert abs(err - res.diagnostics[f"model_error_{m}"]) < 1e-3, (m, err, res.diagnostics)
 
 
-@pytest.mark.slow
 def test_soft_stubby_clamped_timoshenko_meets_the_bar():
     """The red team's case (Euler-Bernoulli chain: -5.0/+7.9/+5.2 %): within 1.5 % and as predicted."""
     scene = _scene(SCENES["clamped-clamped"])
