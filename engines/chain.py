@@ -5,7 +5,9 @@ internal hinge has the stiffness EI/l, a clamped end 2EI/l (the end curvature lu
 segment). Each segment has the mass rho*A*l and the rotary inertia about its centre
 m*l^2/12 (`rotary="none"`: a rigid bar, the Euler-Bernoulli chain) or m*(l^2 + h^2)/12
 (`rotary="section"`: plus the section's own rotary inertia, a Rayleigh beam). The ball hits the
-segment containing x = impact_at*L at that point.
+segment containing x = impact_at*L at that point. `shear=True` (Timoshenko scenes, MuJoCo): a transverse
+slide of kappa G A / l at every node (2 kappa G A / l at a supported end) and the section's rotary inertia,
+a consistent (1/N^2) discretisation of Timoshenko theory, sized and error-estimated against it.
 
 `HenckyChain.linear()` is the chain's small-deflection model in the node deflections w_0..w_N
 (supports remove w_0 and, pinned or clamped at x = L, w_N): mass and stiffness matrices, and the

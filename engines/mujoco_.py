@@ -11,7 +11,8 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
 - rigid plate: the world (a plane geom at z = 0);
 - beam: the Hencky chain of `engines.chain.hencky_chain` (N rigid segments along x, neutral axis at
   z = 0, top face at z = h/2, hinges of EI/l, clamped ends 2EI/l, rotary inertia m l^2/12: option
-  rotary_inertia = "none", the default, the Euler-Bernoulli chain; "section" adds the section's
+  rotary_inertia = "none", the default, the Euler-Bernoulli chain (a Timoshenko beam with the serial chain:
+  the shear-deformable chain, transverse slides kappa G A / l at the nodes, docs/mujoco.md); "section" adds the section's
   m h^2/12, a Rayleigh beam, which lowers the chain's highest frequency (a larger stable dt) at the
   price of a model difference that grows with h/L). N is sized from the scene
   (`engines.chain.segments_for`: the modes that matter within `chain_tol` in frequency and the
