@@ -21,7 +21,9 @@ Scene in Bullet (SI units; z is up, the ball moves down along -z with v0 and tou
   x = 0, free at x = L. N is sized from the scene (`engines.chain.segments_for` at option chain_tol,
   the impact point centred on a link), at most MAX_SIZED_LINKS = 115 (Bullet misbehaves near its
   127-link limit, see there); when the scene needs more, N is capped and the diagnostics' `validity`
-  says so (its `model_error` is the chain's own error at that N).
+  says so (its `model_error` is the chain's own error at that N). A Timoshenko scene builds the shear chain
+  (`hencky_chain(..., shear=True)`, `_build_shear_chain`): a transverse slide link before every hinge link, so
+  two links per segment and at most `sized_cap` = 56 segments (57 on a cantilever).
 
 Always set (engines.md, PyBullet): numSubSteps = 0, contactSlop = 0, zero restitution, friction
 and damping. Measured pitfalls handled here: a link's collision shape sits in its *link* frame
@@ -116,13 +118,38 @@ def most_links(beam) -> int:
     return MAX_LINKS - (1 if beam.support in ("simply-supported", "clamped-clamped") else 0)
 
 
+def is_shear(scene) -> bool:
+    """True when the job builds the Timoshenko chain (a slide and a hinge link per node): theory = timoshenko."""
+    return getattr(scene.target, "theory", "euler-bernoulli") == "timoshenko"
+
+
+def most_segments(beam, shear: bool, links: int = MAX_LINKS) -> int:
+    """Most chain segments within `links` Bullet links: one link per segment (plus the roller) for the
+    Euler-Bernoulli chain; two per segment (slide + hinge) plus the roller and the far end's slide link on a
+    supported beam for the Timoshenko chain."""
+    if not shear:
+        return links - (1 if beam.support in ("simply-supported", "clamped-clamped") else 0)
+    return (links - (2 if beam.support in ("simply-supported", "clamped-clamped") else 0)) // 2
+
+
+def sized_cap(scene) -> int:
+    """Most segments the automatic sizing chooses (within MAX_SIZED_LINKS links)."""
+    shear = is_shear(scene)
+    if not shear:
+        return min(most_links(scene.target), MAX_SIZED_LINKS)
+    return most_segments(scene.target, True, MAX_SIZED_LINKS)
+
+
 def default_segments(scene, settings: EngineSettings | None = None) -> int:
     """Chain links for a beam scene when settings.segments is None (0 for other targets):
-    `engines.chain.segments_for` at option chain_tol, centred impact point, at most `most_links`."""
+    `engines.chain.segments_for` at option chain_tol, centred impact point, at most `most_links`
+    (the Timoshenko chain: at most `sized_cap` segments, two links each)."""
     target = scene.target
     if getattr(target, "kind", "") != "beam":
         return 0
     tol = settings.option("chain_tol", DEFAULT_CHAIN_TOL) if settings is not None else DEFAULT_CHAIN_TOL
+    if is_shear(scene):
+        return _sized_shear(scene, float(tol)).n
     return _sized(scene, float(tol)).n
 
 
@@ -130,6 +157,12 @@ def default_segments(scene, settings: EngineSettings | None = None) -> int:
 def _sized(scene, tol: float):
     most = min(most_links(scene.target), MAX_SIZED_LINKS)
     return segments_for(scene, tol, "none", most, centring(scene.target.impact_at, most))
+
+
+@lru_cache(maxsize=16)
+def _sized_shear(scene, tol: float):
+    most = sized_cap(scene)
+    return segments_for(scene, tol, "none", most, centring(scene.target.impact_at, most), shear=True)
 
 
 @dataclass(frozen=True)
@@ -209,12 +242,16 @@ class PybulletAdapter(SteppingAdapter):
         if scene.target.kind != "beam":
             return None
         n = self.segments(scene, settings)
-        most = most_links(scene.target)
+        shear = is_shear(scene)
+        most = most_segments(scene.target, shear)
         if n < 2:
             raise EngineError(f"pybullet: segments must be at least 2 for a beam, got {n}.")
         if n > most:
             raise EngineError(f"pybullet: segments must be at most {most} for a {scene.target.support} beam (PyBullet "
-                              f"keeps at most {MAX_LINKS} links per multibody, the roller takes one), got {n}.")
+                              f"keeps at most {MAX_LINKS} links per multibody, the roller takes one"
+                              + (", the Timoshenko chain two per segment" if shear else "") + f"), got {n}.")
+        if shear:
+            return hencky_chain(scene.target, n, "none", shear=True)
         return hencky_chain(scene.target, n, "none")
 
     def contact_law(self, scene, settings: EngineSettings):
@@ -250,8 +287,11 @@ class PybulletAdapter(SteppingAdapter):
             err = me.largest
             diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m)
             tol = float(settings.option("chain_tol", DEFAULT_CHAIN_TOL))
-            notes = chain_notes(scene, chain, me, tol,
-                                min(most_links(scene.target), MAX_SIZED_LINKS) if settings.segments is None else None)
+            cap = sized_cap(scene)
+            notes = chain_notes(scene, chain, me, tol, cap if settings.segments is None else None)
+            if chain.shear and settings.segments is None and any(v.startswith("chain capped") for v in notes):
+                notes.append(f"Timoshenko chain: a slide and a hinge link per segment, so at most {cap} segments "
+                             f"({MAX_SIZED_LINKS} of Bullet's {MAX_LINKS} links per multibody)")
         return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag, tuple(notes))
 
     # ------------------------------------------------------------------ the job
@@ -358,7 +398,10 @@ def link_inertia(mass: float, length: float, width: float, height: float) -> lis
 
 def _build_chain(c: _Client, beam, hc: HenckyChain):
     """The beam as the chain `hc` of box links (see the module docstring); returns (body, ChainLinear,
-    revolute joint indices, all joints, K over the revolute coordinates, contact link, local point)."""
+    revolute joint indices, all joints, K over the revolute coordinates, contact link, local point).
+    A shear chain (`hc.shear`): see `_build_shear_chain`."""
+    if hc.shear:
+        return _build_shear_chain(c, beam, hc)
     p = c.p
     length, height, width = beam.length, beam.height, beam.width
     n, h, m_bar = hc.n, hc.segment_length, hc.segment_mass
@@ -439,6 +482,100 @@ def _build_chain(c: _Client, beam, hc: HenckyChain):
 
     basis = linalg.null_space(constraints) if constraints.size else np.eye(nl)
     return body, ChainLinear(mass, stiff, constraints, basis), revolute, all_joints, k_rev, contact_link, local
+
+
+def _build_shear_chain(c: _Client, beam, hc: HenckyChain):
+    """The Timoshenko chain `hc` (engines.chain, shear=True): at every node a massless link on a transverse
+    (z) prismatic joint, its child the segment's box link on the revolute joint about y, so node j's slide
+    opens along the previous segment's transverse axis (kappa G A / l; 2 kappa G A / l at x = 0) and its hinge
+    turns by the relative angle (EI/l). The segment link's rotary inertia is the section's m (l^2 + h^2)/12.
+    A supported beam ends in a small body (half a segment's mass, pinned, so it hardly moves) on a transverse
+    slide of 2 kappa G A / l at x = L, pinned by JOINT_POINT2POINT; the roller at x = 0 is as for the
+    Euler-Bernoulli chain. Spring forces/torques -K q over the slide and hinge coordinates are applied every
+    step, as for the hinges of the Euler-Bernoulli chain. Returns what `_build_chain` returns, with the
+    sprung (slide + hinge) joints in place of the revolute ones."""
+    p = c.p
+    length, height, width = beam.length, beam.height, beam.width
+    n, h, m_bar = hc.n, hc.segment_length, hc.segment_mass
+    support = beam.support
+    roller = support in ("simply-supported", "clamped-clamped")
+    box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[h / 2, width / 2, height / 2],
+                                 collisionFramePosition=[h / 2, 0, 0])
+    masses, shapes, positions, joint_types, axes, inertial, parents = [], [], [], [], [], [], []
+
+    def add(mass, shape, pos, joint, axis, com):
+        masses.append(mass)
+        shapes.append(shape)
+        positions.append(pos)
+        joint_types.append(joint)
+        axes.append(axis)
+        inertial.append(com)
+        parents.append(len(masses) - 1)     # 1-based parent index = previous link (0 = base)
+
+    if roller:      # massless slider along x at x = 0
+        add(0.0, -1, [0, 0, 0], p.JOINT_PRISMATIC, [1, 0, 0], [0, 0, 0])
+    first = len(masses)
+    hit_half = max(h / 2, HIT_BOX_HALF)     # the hit link's box: see _build_chain
+    hit_box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[hit_half, width / 2, height / 2],
+                                     collisionFramePosition=[hc.hit_offset, 0, 0])
+    for i in range(n):
+        add(0.0, -1, [0, 0, 0] if i == 0 else [h, 0, 0], p.JOINT_PRISMATIC, [0, 0, 1], [0, 0, 0])
+        add(m_bar, hit_box if i == hc.hit_segment else box, [0, 0, 0], p.JOINT_REVOLUTE, [0, 1, 0], [h / 2, 0, 0])
+    if roller:      # the far end's slide: a small pinned body at x = L
+        add(m_bar / 2, -1, [h, 0, 0], p.JOINT_PRISMATIC, [0, 0, 1], [0, 0, 0])
+    nl = len(masses)
+    body = c.createMultiBody(
+        baseMass=0.0, baseCollisionShapeIndex=-1, basePosition=[0, 0, 0],
+        linkMasses=masses, linkCollisionShapeIndices=shapes, linkVisualShapeIndices=[-1] * nl,
+        linkPositions=positions, linkOrientations=[[0, 0, 0, 1]] * nl,
+        linkInertialFramePositions=inertial, linkInertialFrameOrientations=[[0, 0, 0, 1]] * nl,
+        linkParentIndices=parents, linkJointTypes=joint_types, linkJointAxis=axes)
+    if c.getNumJoints(body) != nl:
+        raise RuntimeError(f"pybullet built {c.getNumJoints(body)} of {nl} links")
+    all_joints = list(range(nl))
+    sprung = list(range(first, nl))         # slide 0, hinge 0, slide 1, ..., hinge n-1 (, far-end slide)
+    i_x = m_bar * (width**2 + height**2) / 12.0
+    inertia = [i_x, hc.rotary_inertia, (1.0 - INERTIA_MARGIN) * (i_x + hc.rotary_inertia)]
+    for i in range(n):
+        c.changeDynamics(body, first + 2 * i + 1, mass=m_bar, localInertiaDiagonal=inertia)
+    if roller:
+        tiny = 1e-6 * hc.rotary_inertia
+        c.changeDynamics(body, nl - 1, mass=m_bar / 2, localInertiaDiagonal=[tiny, tiny, tiny])
+    _no_losses(c, body, [-1] + all_joints)
+    c.changeDynamics(body, -1, maxJointVelocity=MAX_JOINT_VELOCITY)
+    c.setJointMotorControlArray(body, all_joints, p.VELOCITY_CONTROL, forces=[0.0] * nl)
+
+    # springs over the sprung coordinates: slides (relative transverse offsets) and hinges (relative angles)
+    ns = len(sprung)
+    k_spr = np.zeros((ns, ns))
+    hinges = [2 * i + 1 for i in range(n)]
+    k_spr[0, 0] = hc.support_shear_stiffness
+    for i in range(1, n):
+        k_spr[2 * i, 2 * i] = hc.shear_stiffness
+        k_spr[2 * i + 1, 2 * i + 1] = hc.hinge_stiffness
+    if support in ("clamped-clamped", "cantilever"):
+        k_spr[1, 1] += hc.clamp_stiffness
+    if support == "clamped-clamped":
+        k_spr[np.ix_(hinges, hinges)] += hc.clamp_stiffness
+    if roller:
+        k_spr[ns - 1, ns - 1] = hc.support_shear_stiffness
+
+    q0 = [0.0] * nl
+    mass = np.asarray(c.calculateMassMatrix(body, q0), float)
+    stiff = np.zeros((nl, nl))
+    stiff[first:, first:] = k_spr
+    contact_link = first + 2 * hc.hit_segment + 1
+    local = (hc.hit_offset, 0.0, height / 2)
+    if roller:
+        end_lin, _ = c.calculateJacobian(body, nl - 1, [0, 0, 0], q0, q0, q0)
+        constraints = np.asarray(end_lin, float)[[0, 2]]
+        c.createConstraint(body, nl - 1, -1, -1, p.JOINT_POINT2POINT, [0, 0, 0], [0, 0, 0], [length, 0, 0])
+    else:
+        constraints = np.zeros((0, nl))
+    from scipy import linalg
+
+    basis = linalg.null_space(constraints) if constraints.size else np.eye(nl)
+    return body, ChainLinear(mass, stiff, constraints, basis), sprung, all_joints, k_spr, contact_link, local
 
 
 class _Run:
