@@ -396,21 +396,51 @@ def link_inertia(mass: float, length: float, width: float, height: float) -> lis
     return [i_x, i_y, (1.0 - INERTIA_MARGIN) * (i_x + i_y)]
 
 
+def _segment_box(c, p, h: float, width: float, height: float) -> int:
+    """A segment's collision box [m]. A link's collision shape sits in its link frame (the hinge at the bar's left
+    end), not in its inertial frame: the box is shifted by h/2 so it covers the bar (else sphere-box depths err by um)."""
+    return c.createCollisionShape(p.GEOM_BOX, halfExtents=[h / 2, width / 2, height / 2],
+                                  collisionFramePosition=[h / 2, 0, 0])
+
+
+def _hit_box(c, p, hc, h: float, width: float, height: float) -> int:
+    """The hit link's collision box: centred on the impact point, at least HIT_BOX_HALF [m] each way along x."""
+    hit_half = max(h / 2, HIT_BOX_HALF)
+    return c.createCollisionShape(p.GEOM_BOX, halfExtents=[hit_half, width / 2, height / 2],
+                                  collisionFramePosition=[hc.hit_offset, 0, 0])
+
+
+def _multibody(c, masses, shapes, positions, inertial, parents, joint_types, axes) -> int:
+    """One multibody on a fixed massless base from per-link lists (positions [m], masses [kg]); all built or raise."""
+    nl = len(masses)
+    body = c.createMultiBody(
+        baseMass=0.0, baseCollisionShapeIndex=-1, basePosition=[0, 0, 0],
+        linkMasses=masses, linkCollisionShapeIndices=shapes, linkVisualShapeIndices=[-1] * nl,
+        linkPositions=positions, linkOrientations=[[0, 0, 0, 1]] * nl,
+        linkInertialFramePositions=inertial, linkInertialFrameOrientations=[[0, 0, 0, 1]] * nl,
+        linkParentIndices=parents, linkJointTypes=joint_types, linkJointAxis=axes)
+    if c.getNumJoints(body) != nl:
+        raise RuntimeError(f"pybullet built {c.getNumJoints(body)} of {nl} links")
+    return body
+
+
+def _chain_parts(c, beam, hc: HenckyChain):
+    """What both chain builders start from: (pybullet module, length, height, width [m], segments n, segment
+    length h [m], segment mass [kg], support, roller at x = 0 (a supported far end), the segment's box shape)."""
+    p = c.p
+    roller = beam.support in ("simply-supported", "clamped-clamped")
+    box = _segment_box(c, p, hc.segment_length, beam.width, beam.height)
+    return (p, beam.length, beam.height, beam.width, hc.n, hc.segment_length, hc.segment_mass, beam.support, roller,
+            box)
+
+
 def _build_chain(c: _Client, beam, hc: HenckyChain):
     """The beam as the chain `hc` of box links (see the module docstring); returns (body, ChainLinear,
     revolute joint indices, all joints, K over the revolute coordinates, contact link, local point).
     A shear chain (`hc.shear`): see `_build_shear_chain`."""
     if hc.shear:
         return _build_shear_chain(c, beam, hc)
-    p = c.p
-    length, height, width = beam.length, beam.height, beam.width
-    n, h, m_bar = hc.n, hc.segment_length, hc.segment_mass
-    support = beam.support
-    roller = support in ("simply-supported", "clamped-clamped")
-    # a link's collision shape sits in its link frame (the hinge at the bar's left end), not in its
-    # inertial frame: shift the box by h/2 so it covers the bar (else sphere-box depths err by um)
-    box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[h / 2, width / 2, height / 2],
-                                 collisionFramePosition=[h / 2, 0, 0])
+    p, length, height, width, n, h, m_bar, support, roller, box = _chain_parts(c, beam, hc)
     masses, shapes, positions, joint_types, axes, inertial, parents = [], [], [], [], [], [], []
     if roller:      # massless slider along x at x = 0
         masses.append(0.0)
@@ -426,9 +456,7 @@ def _build_chain(c: _Client, beam, hc: HenckyChain):
     # a link shorter than 2 mm, met the rounded edge first (cantilever hit at 0.97 L: Bullet's gap was 29.6 um at
     # touch, the ball went 30 um in without force; 1 mm ball on 1.8 mm links: 0.64 um) and the energy "grew" by
     # 265-900 %. Links of one multibody do not collide with each other, so the longer box overlaps nothing.
-    hit_half = max(h / 2, HIT_BOX_HALF)
-    hit_box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[hit_half, width / 2, height / 2],
-                                     collisionFramePosition=[hc.hit_offset, 0, 0])
+    hit_box = _hit_box(c, p, hc, h, width, height)
     for i in range(n):
         masses.append(m_bar)
         shapes.append(hit_box if i == hc.hit_segment else box)
@@ -438,14 +466,7 @@ def _build_chain(c: _Client, beam, hc: HenckyChain):
         inertial.append([h / 2, 0, 0])
         parents.append(len(masses) - 1)     # 1-based parent index = previous link (0 = base)
     nl = len(masses)
-    body = c.createMultiBody(
-        baseMass=0.0, baseCollisionShapeIndex=-1, basePosition=[0, 0, 0],
-        linkMasses=masses, linkCollisionShapeIndices=shapes, linkVisualShapeIndices=[-1] * nl,
-        linkPositions=positions, linkOrientations=[[0, 0, 0, 1]] * nl,
-        linkInertialFramePositions=inertial, linkInertialFrameOrientations=[[0, 0, 0, 1]] * nl,
-        linkParentIndices=parents, linkJointTypes=joint_types, linkJointAxis=axes)
-    if c.getNumJoints(body) != nl:
-        raise RuntimeError(f"pybullet built {c.getNumJoints(body)} of {nl} links")
+    body = _multibody(c, masses, shapes, positions, inertial, parents, joint_types, axes)
     all_joints = list(range(nl))
     revolute = list(range(first, nl))
     inertia = link_inertia(m_bar, h, width, height)
@@ -494,13 +515,7 @@ def _build_shear_chain(c: _Client, beam, hc: HenckyChain):
     Euler-Bernoulli chain. Spring forces/torques -K q over the slide and hinge coordinates are applied every
     step, as for the hinges of the Euler-Bernoulli chain. Returns what `_build_chain` returns, with the
     sprung (slide + hinge) joints in place of the revolute ones."""
-    p = c.p
-    length, height, width = beam.length, beam.height, beam.width
-    n, h, m_bar = hc.n, hc.segment_length, hc.segment_mass
-    support = beam.support
-    roller = support in ("simply-supported", "clamped-clamped")
-    box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[h / 2, width / 2, height / 2],
-                                 collisionFramePosition=[h / 2, 0, 0])
+    p, length, height, width, n, h, m_bar, support, roller, box = _chain_parts(c, beam, hc)
     masses, shapes, positions, joint_types, axes, inertial, parents = [], [], [], [], [], [], []
 
     def add(mass, shape, pos, joint, axis, com):
@@ -515,23 +530,14 @@ def _build_shear_chain(c: _Client, beam, hc: HenckyChain):
     if roller:      # massless slider along x at x = 0
         add(0.0, -1, [0, 0, 0], p.JOINT_PRISMATIC, [1, 0, 0], [0, 0, 0])
     first = len(masses)
-    hit_half = max(h / 2, HIT_BOX_HALF)     # the hit link's box: see _build_chain
-    hit_box = c.createCollisionShape(p.GEOM_BOX, halfExtents=[hit_half, width / 2, height / 2],
-                                     collisionFramePosition=[hc.hit_offset, 0, 0])
+    hit_box = _hit_box(c, p, hc, h, width, height)     # see _build_chain
     for i in range(n):
         add(0.0, -1, [0, 0, 0] if i == 0 else [h, 0, 0], p.JOINT_PRISMATIC, [0, 0, 1], [0, 0, 0])
         add(m_bar, hit_box if i == hc.hit_segment else box, [0, 0, 0], p.JOINT_REVOLUTE, [0, 1, 0], [h / 2, 0, 0])
     if roller:      # the far end's slide: a small pinned body at x = L
         add(m_bar / 2, -1, [h, 0, 0], p.JOINT_PRISMATIC, [0, 0, 1], [0, 0, 0])
     nl = len(masses)
-    body = c.createMultiBody(
-        baseMass=0.0, baseCollisionShapeIndex=-1, basePosition=[0, 0, 0],
-        linkMasses=masses, linkCollisionShapeIndices=shapes, linkVisualShapeIndices=[-1] * nl,
-        linkPositions=positions, linkOrientations=[[0, 0, 0, 1]] * nl,
-        linkInertialFramePositions=inertial, linkInertialFrameOrientations=[[0, 0, 0, 1]] * nl,
-        linkParentIndices=parents, linkJointTypes=joint_types, linkJointAxis=axes)
-    if c.getNumJoints(body) != nl:
-        raise RuntimeError(f"pybullet built {c.getNumJoints(body)} of {nl} links")
+    body = _multibody(c, masses, shapes, positions, inertial, parents, joint_types, axes)
     all_joints = list(range(nl))
     sprung = list(range(first, nl))         # slide 0, hinge 0, slide 1, ..., hinge n-1 (, far-end slide)
     i_x = m_bar * (width**2 + height**2) / 12.0

@@ -108,32 +108,30 @@ def test_euler_bernoulli_scenes_build_the_unchanged_chain():
     assert "Euler-Bernoulli chain on a Timoshenko scene" in " ".join(ad.plan(tim_scene, hit).validity)
 
 
+def _meets_the_bar_as_predicted(engine: str, scene_file, to_prediction: float) -> None:
+    """`engine` at defaults (injected Hertz) on a Timoshenko scene: ok, no 'Euler-Bernoulli chain' note, each metric
+    within BAR of the Timoshenko reference and within `to_prediction` of the chain's predicted model_error."""
+    scene = _scene(scene_file)
+    ref = impactval.solve(scene, tol=1e-6)
+    res = execute_job(engine, scene, EngineSettings())
+    assert res.status == "ok", res.message
+    assert not any("Euler-Bernoulli" in v for v in res.validity), res.validity
+    for m in ("t_m", "f_m", "delta_m"):
+        err = getattr(res, m) / getattr(ref, m) - 1.0
+        assert abs(err) < BAR, (m, err)
+        assert abs(err - res.diagnostics[f"model_error_{m}"]) < to_prediction, (m, err, res.diagnostics)
+
+
 def test_timoshenko_scene_at_defaults_meets_the_bar_as_predicted():
     """Simply supported stubby Timoshenko beam (catalogue) at defaults, injected Hertz: within 1.5 % of the
     Timoshenko reference, the measured error equals the chain's predicted model_error (+ the small dt error),
     and the row carries no 'Euler-Bernoulli chain' note."""
-    scene = _scene(SCENES["simply-supported"])
-    ref = impactval.solve(scene, tol=1e-6)
-    res = execute_job("mujoco", scene, EngineSettings())
-    assert res.status == "ok", res.message
-    assert not any("Euler-Bernoulli" in v for v in res.validity), res.validity
-    for m in ("t_m", "f_m", "delta_m"):
-        err = getattr(res, m) / getattr(ref, m) - 1.0
-        assert abs(err) < BAR, (m, err)
-        assert abs(err - res.diagnostics[f"model_error_{m}"]) < 1e-3, (m, err, res.diagnostics)
+    _meets_the_bar_as_predicted("mujoco", SCENES["simply-supported"], 1e-3)
 
 
 def test_soft_stubby_clamped_timoshenko_meets_the_bar():
     """The red team's case (Euler-Bernoulli chain: -5.0/+7.9/+5.2 %): within 1.5 % and as predicted."""
-    scene = _scene(SCENES["clamped-clamped"])
-    ref = impactval.solve(scene, tol=1e-6)
-    res = execute_job("mujoco", scene, EngineSettings())
-    assert res.status == "ok", res.message
-    assert not any("Euler-Bernoulli" in v for v in res.validity), res.validity
-    for m in ("t_m", "f_m", "delta_m"):
-        err = getattr(res, m) / getattr(ref, m) - 1.0
-        assert abs(err) < BAR, (m, err)
-        assert abs(err - res.diagnostics[f"model_error_{m}"]) < 1e-3, (m, err)
+    _meets_the_bar_as_predicted("mujoco", SCENES["clamped-clamped"], 1e-3)
 
 
 # ---------------------------------------------------------------------------- PyBullet's Timoshenko chain
@@ -204,15 +202,7 @@ def test_pybullet_timoshenko_scene_at_defaults_meets_the_bar_as_predicted(suppor
     clamped -5.0/+7.9/+5.2 %, simply supported +1.45/+0.79/+0.53 %): within 1.5 % of the Timoshenko reference,
     equal to the chain's predicted model_error within 0.05 %, and no 'Euler-Bernoulli chain' note."""
     pytest.importorskip("pybullet", reason="pip install 'impactval[pybullet]'")
-    scene = _scene(SCENES[support])
-    ref = impactval.solve(scene, tol=1e-6)
-    res = execute_job("pybullet", scene, EngineSettings())
-    assert res.status == "ok", res.message
-    assert not any("Euler-Bernoulli" in v for v in res.validity), res.validity
-    for m in ("t_m", "f_m", "delta_m"):
-        err = getattr(res, m) / getattr(ref, m) - 1.0
-        assert abs(err) < BAR, (m, err)
-        assert abs(err - res.diagnostics[f"model_error_{m}"]) < 5e-4, (m, err, res.diagnostics)
+    _meets_the_bar_as_predicted("pybullet", SCENES[support], 5e-4)
 
 
 def test_pybullet_capped_timoshenko_chain_says_the_cap():
