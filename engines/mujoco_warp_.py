@@ -239,8 +239,6 @@ class MujocoWarpAdapter(EngineAdapter):
                                  f"predicted model error t_m {100 * me.t_m:+.2g} / f_m {100 * me.f_m:+.2g} % (the capped "
                                  f"chain's own: its f_m swings with where the hit falls in a segment, and the sizing takes "
                                  f"the N near the cap with the smallest)")
-        if notes:
-            diagnostics["validity"] = "; ".join(notes)
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,
                          energy=energy, build_s=build_s, step_s=step_s, n_steps=n_steps,
                          model=f"mujoco-warp-{_model_kind(lay)}-{contact}-float32", diagnostics=diagnostics,

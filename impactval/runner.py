@@ -348,10 +348,10 @@ class _References:
 
 
 #: loosest tolerance the other theory's reference is solved to: the gap is a percent-level quantity, and a
-#: sweep's tol 1e-9 made a clamped Timoshenko solve take ~8 min before any engine job ran; at 1e-6 the automatic
-#: mode count of a slender Timoshenko cantilever (tests/unseen2/cantilever_ti_long_slender, L/h = 250) doubled past
-#: 1024 modes for > 10 min (the run's progress stalled) and returned t_m +14914 %, f_m -99.3 %; at 1e-5 it stops at
-#: 1024 modes in ~12 s with t_m +0.59 %, f_m -1.11 % (explicit 256/512 modes: f_m -0.91/-0.99 %)
+#: sweep's tol 1e-9 made a clamped Timoshenko solve take ~8 min before any engine job ran. (At 1e-6 a slender
+#: Timoshenko cantilever once ran past 1024 modes for > 10 min and returned t_m +14914 %: that was the reference's
+#: Timoshenko root search losing the first mode at 4096 modes, fixed in reference/timoshenko.py; 1e-6 now takes
+#: 14 s there, 1e-5 3 s with t_m +0.59 %, f_m -1.11 %, explicit 256/512 modes: f_m -0.91/-0.99 %.)
 THEORY_GAP_TOL = 1e-5
 
 
