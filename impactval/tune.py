@@ -89,13 +89,11 @@ def at_speed(scene, speed: float):
 
 
 def contact_mass(scene) -> float:
-    """The mass the contact spring works against [kg]: the ball's, or for a second ball the reduced mass
-    m1 m2 / (m1 + m2) (the two-ball contact is the same as that mass on a rigid plate)."""
-    if scene.target.kind == "ball":
-        from impactval.reference.spheres import reduced_mass
+    """The mass [kg] the contact spring works against: the ball's, or the reduced mass of two balls
+    (`engines.base.contact_mass`; the two-ball contact is that mass on a rigid plate)."""
+    from impactval.engines.base import contact_mass as _contact_mass
 
-        return reduced_mass(scene)
-    return scene.ball.mass
+    return _contact_mass(scene)
 
 
 def default_dt(scene, speeds: Sequence[float]) -> float:
