@@ -707,7 +707,7 @@ def _shift(c: np.ndarray, q: float, inv_q: float, out: np.ndarray) -> None:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, j0, H, R, alpha, m0, p):
+def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
     """delta_max of the first contact from the scheme's own solution between its nodes [m].
 
     The peak of delta was the maximum of the degree-6 interpolant of the node values. delta carries the ringing
@@ -719,15 +719,16 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, j0, H, R, alpha, m0, p):
     re-expanded on each sub-step), on which delta = x_ball - sum Im y (less the residual spring's R f) is exact
     for the same force; the degree-6 interpolant of the sub-step values around the largest gives the peak.
     t, d, f, x, u: the run's nodes (time [s], delta [m], force [N], ball displacement [m] and velocity [m/s]) up
-    to `end` (the node ending the first contact); tables at level j + j0 for step H / 2^j, as in `run`."""
+    to `end` (the node ending the first contact); tables at level j + j0 for step H / 2^j and energy weights ew, as in
+    `run` (the sweep is `run`'s own)."""
     n = Er.shape[1]
     nlev = Er.shape[0]
     pk = 0
     for k in range(end):
         if d[k] > d[pk]:
             pk = k
-    k_lo = max(pk - 2, 0)
-    k_hi = min(pk + 2, end)
+    k_lo = max(pk - 1, 0)            # the steps on either side of the largest node are refined
+    k_hi = min(pk + 1, end)
     yr = np.zeros(n)
     yi = np.zeros(n)
     sig = np.empty(p + 1)
@@ -758,30 +759,23 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, j0, H, R, alpha, m0, p):
             coef[l] = acc
         jt = j0 + int(np.round(np.log2(H / eta)))
         if k <= k_lo:
-            for i in range(n):
-                a = Er[jt, i] * yr[i] - Ei[jt, i] * yi[i]
-                b = Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
-                for l in range(p + 1):
-                    a += Kr[jt, l, i] * coef[l]
-                    b += Ki[jt, l, i] * coef[l]
-                yr[i] = a
-                yi[i] = b
+            if p == 5:
+                _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+            else:
+                _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, p)
             continue
         js = min(jt + DENSE_LEVELS, nlev - 1)
         nq = 2 ** (js - jt)
         es = eta / nq
         for q in range(nq):
             _shift(coef, float(q), 1.0 / nq, sub)
+            if p == 5:
+                _sweep6(Er, Ei, Kr, Ki, js, sub, yr, yi, ew)
+            else:
+                _sweep(Er, Ei, Kr, Ki, js, sub, yr, yi, ew, p)
             x2 = 0.0
             for i in range(n):
-                a = Er[js, i] * yr[i] - Ei[js, i] * yi[i]
-                b = Er[js, i] * yi[i] + Ei[js, i] * yr[i]
-                for l in range(p + 1):
-                    a += Kr[js, l, i] * sub[l]
-                    b += Ki[js, l, i] * sub[l]
-                yr[i] = a
-                yi[i] = b
-                x2 += b
+                x2 += yi[i]
             wu = 0.0
             wx = 0.0
             fs = 0.0
@@ -844,7 +838,8 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
         c = contacts(t_q[:cnt_q], d_q[:cnt_q], fl_q[:cnt_q], f_q[:cnt_q], R)
         end = _first_end(fl_q[:cnt_q])
         if end > 2:
-            c[0, 2] = dense_peak(t_q, d_q, f_q, x_q, u_q, end, Er, Ei, Kr, Ki, 2 - q, H * 2.0 ** q, R, alpha, m0, p)
+            c[0, 2] = dense_peak(t_q, d_q, f_q, x_q, u_q, end, Er, Ei, Kr, Ki, ew, 2 - q, H * 2.0 ** q, R, alpha, m0,
+                                 p)
         tables.append(c)
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
             e[:cnt].copy(), fl[:cnt].copy(), tables[0], tables[1], tables[2])
@@ -1030,7 +1025,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         fine = contacts(t, d, fl, f, R)
         end = _first_end(fl)
         if end > 2:         # the first contact's peak as in the estimate (the same run up to there)
-            fine[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, 2, H, R, alpha, m0, p)
+            fine[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
     # the first contact's end node (ball velocity there = rebound) and the largest energy drift
     end = 0
     for k in range(cnt):
