@@ -145,7 +145,7 @@ class ImpactResult:
 
 
 def build(cls, values: dict[str, Any]):
-    """The instance `cls(**values)` of a frozen dataclass of this package (ImpactResult, Metrics, Contact, the
+    """The instance `cls(**values)` of a frozen dataclass of this package with many fields (ImpactResult, the
     solver's Run), made without the generated __init__'s one object.__setattr__ per field: the reference
     solver builds one per call and its __init__ cost ~5 us of a ~100 us solve. Same fields in the same order,
     defaults and default factories as __init__ (a fresh list/dict/array per instance), __post_init__ run;
@@ -156,11 +156,12 @@ def build(cls, values: dict[str, Any]):
     d.update(values)
     if len(d) != len(plain):
         raise TypeError(f"{cls.__name__} has no field {sorted(set(values) - set(plain))[0]!r}")
-    if not required <= values.keys():
-        raise TypeError(f"{cls.__name__} needs field {sorted(required - set(values))[0]!r}")
-    for name, factory in factories:
-        if name not in values:
-            d[name] = factory()
+    if len(values) != len(plain):          # some fields left to their defaults
+        if not required <= values.keys():
+            raise TypeError(f"{cls.__name__} needs field {sorted(required - set(values))[0]!r}")
+        for name, factory in factories:
+            if name not in values:
+                d[name] = factory()
     obj = object.__new__(cls)
     object.__setattr__(obj, "__dict__", d)
     if post is not None:

@@ -130,11 +130,9 @@ def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float
 
 def _make_run(alpha, t, d, f, x, u, e, table, end: int, drift: float) -> Run:
     """A Run from the kernel's series and contact table (rows t_start, t_end, delta_max)."""
-    contacts = tuple([build(Contact, {"t_start": a, "t_end": b, "f_max": alpha * c**1.5, "delta_max": c})
-                      for a, b, c in table.tolist()])
+    contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
     first = contacts[0]
-    return build(Run, {"metrics": build(Metrics, {"t_m": first.t_end - first.t_start, "f_m": first.f_max,
-                                                   "delta_m": first.delta_max}),
+    return build(Run, {"metrics": Metrics(first.t_end - first.t_start, first.f_max, first.delta_max),
                        "n_steps": len(t) - 1, "t": t, "delta": d, "f": f, "x_ball": x, "u_ball": u, "energy": e,
                        "contacts": contacts, "rebound_velocity": -float(u[end]), "energy_error": drift})
 
