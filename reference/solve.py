@@ -185,6 +185,17 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
     (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
+    t, d, f, x, u, e, table, rel, end, drift = _solve_series(modes, mass, alpha, v0, tol, window, series_samples)
+    run = _make_run(alpha, t, d, f, x, u, e, table, end, drift)
+    m = run.metrics
+    return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+
+
+def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float, window: float,
+                  series_samples: float = kernel.SERIES_SAMPLES):
+    """solve_modes' kernel call and refusals: (t, delta, f, x_ball, u_ball, energy series, contact table rows
+    (t_start, t_end, delta_max), relative uncertainty, index of the node ending the first contact, largest
+    |E/E0 - 1|)."""
     plate = _plate(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
@@ -204,9 +215,7 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
             f"the first contact needs more than {cap} steps (it lasts far longer than the rigid-plate "
             f"contact time {plate.t_m:.3g} s): the structure is far softer than the contact (ball mass "
             f"{mass:.3g} kg); refused to stay within memory: use a lighter ball, a stiffer target or a looser tol")
-    run = _make_run(alpha, t, d, f, x, u, e, fine, end, drift)
-    m = run.metrics
-    return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+    return t, d, f, x, u, e, fine, rel, end, drift
 
 
 #: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
@@ -296,14 +305,22 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
         unc = Metrics(unc.t_m + trunc.t_m, unc.f_m + trunc.f_m, unc.delta_m + trunc.delta_m)
         model += "+static" if static_correction else ""
-    else:
+        m = run.metrics
+        t_m, f_m, delta_m = m.t_m, m.f_m, m.delta_m
+        t, f, delta, x_ball, energy = run.t, run.f, run.delta, run.x_ball, run.energy
+        contacts, rebound, drift, n_steps = run.contacts, run.rebound_velocity, run.energy_error, run.n_steps
+    else:       # solve_modes without its Run (the same numbers, fewer objects per call)
         md = _target_modes(scene, fixed)
-        run, unc = solve_modes(md, mass, alpha, v0, tol, window)
+        t, delta, f, x_ball, u, energy, table, rel, end, drift = _solve_series(md, mass, alpha, v0, tol, window)
         n_modes = md.n
-    m = run.metrics
-    t_m, f_m, delta_m = m.t_m, m.f_m, m.delta_m
+        contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
+        first = contacts[0]
+        t_m, f_m, delta_m = first.t_end - first.t_start, first.f_max, first.delta_max
+        m = Metrics(t_m, f_m, delta_m)
+        unc = Metrics(rel * t_m, rel * f_m, rel * delta_m)
+        rebound, n_steps = -float(u[end]), len(t) - 1
     if not (math.isfinite(t_m) and math.isfinite(f_m) and math.isfinite(delta_m) and math.isfinite(unc.t_m)
-            and math.isfinite(unc.f_m) and math.isfinite(unc.delta_m) and math.isfinite(run.rebound_velocity)) \
+            and math.isfinite(unc.f_m) and math.isfinite(unc.delta_m) and math.isfinite(rebound)) \
             or min(t_m, f_m, delta_m) <= 0.0:
         raise ImpactvalError(f"scene {scene.name!r}: the reference solver got a non-finite or non-positive answer "
                              f"(t_m={t_m!r}, f_m={f_m!r}, delta_m={delta_m!r}): an input is outside the range "
@@ -314,14 +331,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     if rel > tol * (1 + 1e-9):
         validity += (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the mode count or step "
                      f"reached its limit",)
-    x_ball, delta = run.x_ball, run.delta
     return build(ImpactResult, {
         "scene": scene.name, "source": "reference", "model": model, "t_m": t_m, "f_m": f_m, "delta_m": delta_m,
-        "validity": validity, "uncertainty": unc, "modes": n_modes, "t": run.t, "f": run.f, "delta": delta,
-        "x_ball": x_ball, "x_structure": x_ball - delta, "energy": run.energy, "rebound_velocity": run.rebound_velocity,
-        "energy_error": run.energy_error, "contacts": run.contacts,
-        "settings": {"tol": tol, "window": window, "p": P_DEGREE}, "n_steps": run.n_steps,
-        "wall_time_step_s": time.perf_counter() - t0})
+        "validity": validity, "uncertainty": unc, "modes": n_modes, "t": t, "f": f, "delta": delta,
+        "x_ball": x_ball, "x_structure": x_ball - delta, "energy": energy, "rebound_velocity": rebound,
+        "energy_error": drift, "contacts": contacts, "settings": {"tol": tol, "window": window, "p": P_DEGREE},
+        "n_steps": n_steps, "wall_time_step_s": time.perf_counter() - t0})
 
 
 def _target_modes(scene, n: int | None) -> Modes:
