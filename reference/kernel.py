@@ -234,8 +234,10 @@ def _solve_contact(D: float, B: float, alpha: float) -> float:
         d -= step
         if d <= 0.0:
             d = 1e-300
-        # quadratic convergence until rounding: stop at 1 ulp or when the step stops shrinking
-        if abs(step) <= 2.3e-16 * d or abs(step) >= 0.5 * prev:
+        # quadratic convergence: the error after a step s is <= (F''/2F') s^2 <= s^2 / (4 d) (F''/2F' d =
+        # 0.375 c sqrt(d) / (1 + 1.5 c sqrt(d)) < 1/4, c = B alpha), so once s <= 2e-8 d the new d is exact to
+        # 1e-16 (relative) and the step that would confirm it is skipped; also stop when the step stops shrinking
+        if abs(step) <= 2e-8 * d or abs(step) >= 0.5 * prev:
             break
         prev = abs(step)
     return d

@@ -186,3 +186,29 @@ def test_validity_of_a_mutable_scene_is_not_kept():
     assert not any("mutable" in w for w in hertz_validity(s, r.f_m, r.delta_m))
     m.yield_stress = 1e6
     assert any("mutable" in w for w in hertz_validity(s, r.f_m, r.delta_m))
+
+
+def test_contact_equation_root_is_exact_to_roundoff():
+    """kernel._solve_contact (Newton that skips the confirming step once the step is <= 2e-8 of the root) against
+    the root of delta + c delta^1.5 = D in 50-digit decimal arithmetic (bisection, independent of the kernel),
+    over c = B alpha spanning the structure-dominated (c sqrt(D) << 1) to the contact-dominated (>> 1) regime."""
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 50
+    worst = 0.0
+    for D in (1e-12, 3e-9, 1e-6, 2e-5, 1e-3):
+        for c_sqrtD in (1e-8, 1e-3, 0.1, 1.0, 7.0, 1e3, 1e8):
+            c = c_sqrtD / math.sqrt(D)
+            B, alpha = c / 1e10, 1e10
+            got = kernel._solve_contact(D, B, alpha)
+            Dd, cd = Decimal(D), Decimal(B) * Decimal(alpha)
+            lo, hi = Decimal(0), Dd
+            for _ in range(200):
+                mid = (lo + hi) / 2
+                if mid + cd * mid * mid.sqrt() > Dd:
+                    hi = mid
+                else:
+                    lo = mid
+            exact = float((lo + hi) / 2)
+            worst = max(worst, abs(got - exact) / exact)
+    assert worst <= 4.5e-16, worst
