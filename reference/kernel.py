@@ -817,7 +817,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
         jt = j0 + int(np.round(np.log2(H / eta)))
         if k <= k_lo:
             if p == 5:
-                _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+                _sweep6_free(Er, Ei, Kr, Ki, jt, coef, yr, yi)
             else:
                 _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, p)
             continue
@@ -827,7 +827,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
         for q in range(nq):
             _shift(coef, float(q), 1.0 / nq, sub)
             if p == 5:
-                _sweep6(Er, Ei, Kr, Ki, js, sub, yr, yi, ew)
+                _sweep6_free(Er, Ei, Kr, Ki, js, sub, yr, yi)
             else:
                 _sweep(Er, Ei, Kr, Ki, js, sub, yr, yi, ew, p)
             x2 = 0.0
@@ -881,26 +881,30 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
     runs of one error estimate. Returns (status, n_nodes and series of the fine run, its contacts, the coarse
     run's, the coarsest run's); contacts rows are (t_start, t_end, delta_max)."""
     Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
-    out = []
-    for j0 in range(2, -1, -1):
-        h = H * 2.0 ** (2 - j0)
-        out.append(run(ew, m0, alpha, v0, R, h, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, j0, None, 0.0,
-                       j0 == 2))       # the 2H and 4H runs skip the modal energy (nobody reads it)
-    st, cnt, t, d, f, x, u, e, fl = out[0]
-    z = np.zeros((0, 3))
-    if st != STATUS_OK or out[1][0] != STATUS_OK or out[2][0] != STATUS_OK:
+    # the 2H and 4H runs skip the modal energy (nobody reads it)
+    st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, False)
+    st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, False)
+    st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, 2)
+    if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
+        z = np.zeros((0, 3))
         return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
-    tables = []
-    for q in range(3):
-        st_q, cnt_q, t_q, d_q, f_q, x_q, u_q, e_q, fl_q = out[q]
-        c = contacts(t_q[:cnt_q], d_q[:cnt_q], fl_q[:cnt_q], f_q[:cnt_q], R)
-        end = _first_end(fl_q[:cnt_q])
-        if end > 2:
-            c[0, 2] = dense_peak(t_q, d_q, f_q, x_q, u_q, end, Er, Ei, Kr, Ki, ew, 2 - q, H * 2.0 ** q, R, alpha, m0,
-                                 p)
-        tables.append(c)
+    fine = _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
+    coarse = _dense_contacts(tc, dc, fc, xc, uc, flc, cnt_c, Er, Ei, Kr, Ki, ew, 1, 2.0 * H, R, alpha, m0, p)
+    coarsest = _dense_contacts(tcc, dcc, fcc, xcc, ucc, flcc, cnt_cc, Er, Ei, Kr, Ki, ew, 0, 4.0 * H, R, alpha, m0, p)
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
-            e[:cnt].copy(), fl[:cnt].copy(), tables[0], tables[1], tables[2])
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
+
+
+@njit(cache=True)
+def _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
+    """`contacts` of one run (its first cnt nodes) with the first contact's delta_max from `dense_peak`."""
+    c = contacts(t[:cnt], d[:cnt], fl[:cnt], f[:cnt], R)
+    end = _first_end(fl[:cnt])
+    if end > 2:
+        c[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p)
+    return c
 
 #: the observed ratio r = |x_2h - x_4h| / |x_h - x_2h| is trusted only up to r / RATIO_SAFETY: before the scheme is
 #: asymptotic (r < 2^(p+1) = 64) the next halving often gains less than the last one did (random scenes: the
@@ -935,22 +939,26 @@ def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
 
 
 @njit(cache=True)
+def _factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray, r: int) -> float:
+    """`unresolved_factor` with row r of a 2-D table (no row view per call)."""
+    nt = theta_tab.shape[0]
+    if theta <= theta_tab[0]:
+        x = theta / theta_tab[0]
+        x2 = x * x
+        return c_tab[r, 0] * x2 * x2 * x2
+    k = np.searchsorted(theta_tab, theta)      # the first point >= theta
+    if k < nt:
+        return c_tab[r, k]
+    return max(c_tab[r, nt - 1], 0.25 * c_tab[r, nt - 1] * sqrt_w)
+
+
+@njit(cache=True)
 def unresolved_factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
     """Measured error factor C of one mode at phase theta = omega H per base step (c_tab: one row of the table):
     the value of the first table point >= theta (a step function), ~theta^6 below the table; above it the larger
     of the last value and c_tab[-1] * sqrt(w) / 4 (the error of a stiff unresolved mode falls like w^-3, not
     w^-3.5)."""
-    k = 0
-    nt = theta_tab.shape[0]
-    if theta <= theta_tab[0]:
-        x = theta / theta_tab[0]
-        x2 = x * x
-        return c_tab[0] * x2 * x2 * x2
-    while k < nt and theta_tab[k] < theta:
-        k += 1
-    if k < nt:
-        return c_tab[k]
-    return max(c_tab[nt - 1], 0.25 * c_tab[nt - 1] * sqrt_w)
+    return _factor(theta, sqrt_w, theta_tab, c_tab.reshape((1, c_tab.shape[0])), 0)
 
 
 @njit(cache=True)
@@ -960,7 +968,7 @@ def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
     (c_tab[r]: the table of modes of coupling class r, row[i] that of mode i)."""
     total = 0.0
     for i in range(omega.shape[0]):
-        total += s_w[i] * unresolved_factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab[row[i]])
+        total += s_w[i] * _factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab, row[i])
     return total
 
 
