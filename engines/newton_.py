@@ -246,7 +246,7 @@ class NewtonAdapter(EngineAdapter):
         theory = getattr(scene.target, "theory", "euler-bernoulli")
         rigid_f = diag.get("model_error_rigid_f_m", diag["model_error_f_m"])
         parts = [f"rigid chain N = {chain.n} ({chain.rotary} rotary inertia) {100 * rigid_f:+.2g} % in f_m"]
-        if "penalty_give_f_m" in diag:
+        if "penalty_give_f_m" in diag and not chain.shear:      # the Timoshenko chain's joints give nothing in z
             parts.append(f"the penalty joints' give at attach_ke {diag['attach_ke']:.3g} N/m {100 * diag['penalty_give_f_m']:+.2g} %")
         if theory != "euler-bernoulli" and not chain.shear:
             fix = (f"the chain is Euler-Bernoulli and the scene's theory {theory} (the Timoshenko chain is built for "
