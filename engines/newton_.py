@@ -559,7 +559,9 @@ def linearised_chain(adapter, scene, settings: EngineSettings, eps: float = 1e-6
     wp = import_warp()
     import newton
 
-    settings = replace_settings(settings, integrator="semi-implicit", contact="hertz")
+    from dataclasses import replace
+
+    settings = replace(settings, integrator="semi-implicit", contact="hertz")
     model, lay = adapter.build(scene, settings, wp, newton)
     solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0, joint_attach_ke=adapter.attach_ke(scene, settings),
                                                joint_attach_kd=0.0)
@@ -601,12 +603,6 @@ def linearised_chain(adapter, scene, settings: EngineSettings, eps: float = 1e-6
     diag = np.empty(2 * n)
     diag[0::2], diag[1::2] = mass, inertia
     return diag, 0.5 * (k + k.T)
-
-
-def replace_settings(settings: EngineSettings, **kw) -> EngineSettings:
-    from dataclasses import replace
-
-    return replace(settings, **kw)
 
 
 def _energy_failure(result) -> bool:
