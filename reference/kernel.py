@@ -315,7 +315,7 @@ def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0, omega=None,
-        sample_dt=0.0, energy=True):
+        sample_dt=0.0, energy=True, peak_state=None):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
     and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
     table level j + j0 (so one table set serves base steps H and H/2).
@@ -325,8 +325,13 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     close no faster than u + sum omega_i |y_i|, and never closes once the ball moves away with
     x1 < -sum |y_i| (free modes keep |y_i|). `omega` [rad/s] is needed for the jumps.
 
-    `energy` False leaves the modal energy out (the energy series is then NaN after the first node; nothing else
-    changes): for runs whose series nobody reads.
+    `energy` None leaves the modal energy out (the energy series is then NaN after the first node; nothing else
+    changes): for runs whose series nobody reads. None, not False: numba prunes the branch of a None (or omitted)
+    argument at compile time, while a runtime flag keeps both inlined sweeps and made every run ~1.2x slower.
+
+    `peak_state` (float array of 2 n + 1, optional) receives the modes' state at the node BEFORE the first contact's
+    largest delta node (real parts, imaginary parts, then that largest node's index), so that `dense_peak` can
+    start there instead of sweeping every mode from touch again.
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
@@ -336,6 +341,8 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     gam = (p - 0.5) / (p + 1.0)
     yr = np.zeros(n)
     yi = np.zeros(n)
+    d_top = 0.0                       # the first contact's largest delta so far (for peak_state)
+    first_open = True                 # the first contact has not ended yet
     ta = np.empty(max_nodes)
     da = np.empty(max_nodes)
     fa = np.empty(max_nodes)
@@ -536,11 +543,17 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 continue
             break
         # ---------------------------------------------------------------- accept
+        if peak_state is not None and first_open and d_new > d_top:
+            d_top = d_new                # a new largest node: keep the state before its step
+            for i in range(n):
+                peak_state[i] = yr[i]
+                peak_state[n + i] = yi[i]
+            peak_state[2 * n] = count
         # every mode over the step in one sweep: y <- E y + sum_l K_l (a_l + c_l f_new)
         for l in range(p + 1):
             coef[l] = a_known[l] + c[l] * f_new if l <= m else 0.0
         if p == 5:
-            if energy:
+            if energy is not None:
                 emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
             else:
                 emod = np.nan
@@ -565,6 +578,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         j_prev = j
         if in_contact and delta <= 0.0:
             in_contact = False
+            first_open = False
             flags[count] = 2
             if t_end < 0.0 and window > 0.0:
                 t_end = t + window
@@ -729,9 +743,9 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
     """
     Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
     st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
-                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, False)
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, None)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, False)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, None)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, window,
                                         Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / SERIES_SAMPLES)
     if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
@@ -764,7 +778,7 @@ def _shift(c: np.ndarray, q: float, inv_q: float, out: np.ndarray) -> None:
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
-def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
+def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, peak_state=None):
     """delta_max of the first contact from the scheme's own solution between its nodes [m].
 
     The peak of delta was the maximum of the degree-6 interpolant of the node values. delta carries the ringing
@@ -777,17 +791,25 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
     for the same force; the degree-6 interpolant of the sub-step values around the largest gives the peak.
     t, d, f, x, u: the run's nodes (time [s], delta [m], force [N], ball displacement [m] and velocity [m/s]) up
     to `end` (the node ending the first contact); tables at level j + j0 for step H / 2^j and energy weights ew, as in
-    `run` (the sweep is `run`'s own)."""
+    `run` (the sweep is `run`'s own). With the run's `peak_state` (see `run`) the sweep starts at the node before the largest one."""
     n = Er.shape[1]
     nlev = Er.shape[0]
-    pk = 0
-    for k in range(end):
-        if d[k] > d[pk]:
-            pk = k
-    k_lo = max(pk - 1, 0)            # the steps on either side of the largest node are refined
-    k_hi = min(pk + 1, end)
     yr = np.zeros(n)
     yi = np.zeros(n)
+    start = 1
+    if peak_state is not None:
+        pk = int(peak_state[2 * n])
+        for i in range(n):
+            yr[i] = peak_state[i]
+            yi[i] = peak_state[n + i]
+        start = max(pk - 1, 0) + 1   # the modes are at node pk - 1 already
+    else:
+        pk = 0
+        for k in range(end):
+            if d[k] > d[pk]:
+                pk = k
+    k_lo = max(pk - 1, 0)            # the steps on either side of the largest node are refined
+    k_hi = min(pk + 1, end)
     sig = np.empty(p + 1)
     L = np.empty((p + 1, p + 1))
     Pw = np.empty(p + 2)
@@ -801,7 +823,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
     ns = 1
     x1 = x[k_lo]
     u1 = u[k_lo]
-    for k in range(1, k_hi + 1):
+    for k in range(start, k_hi + 1):
         eta = t[k] - t[k - 1]
         first = max(k - p, 0)
         m = k - first
@@ -882,28 +904,35 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
     run's, the coarsest run's); contacts rows are (t_start, t_end, delta_max)."""
     Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
     # the 2H and 4H runs skip the modal energy (nobody reads it)
+    # each run keeps its modes' state next to its largest node, where dense_peak starts
+    nm = ew.shape[0]
+    pk_cc = np.zeros(2 * nm + 1)
+    pk_c = np.zeros(2 * nm + 1)
+    pk = np.zeros(2 * nm + 1)
     st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
-                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, False)
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, None, pk_cc)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, False)
-    st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, 2)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, None, pk_c)
+    st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, 2,
+                                        peak_state=pk)
     if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
         z = np.zeros((0, 3))
         return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
-    fine = _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
-    coarse = _dense_contacts(tc, dc, fc, xc, uc, flc, cnt_c, Er, Ei, Kr, Ki, ew, 1, 2.0 * H, R, alpha, m0, p)
-    coarsest = _dense_contacts(tcc, dcc, fcc, xcc, ucc, flcc, cnt_cc, Er, Ei, Kr, Ki, ew, 0, 4.0 * H, R, alpha, m0, p)
+    fine = _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p, pk)
+    coarse = _dense_contacts(tc, dc, fc, xc, uc, flc, cnt_c, Er, Ei, Kr, Ki, ew, 1, 2.0 * H, R, alpha, m0, p, pk_c)
+    coarsest = _dense_contacts(tcc, dcc, fcc, xcc, ucc, flcc, cnt_cc, Er, Ei, Kr, Ki, ew, 0, 4.0 * H, R, alpha, m0, p,
+                               pk_cc)
     return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
             e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
 
 
 @njit(cache=True)
-def _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
+def _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, peak_state=None):
     """`contacts` of one run (its first cnt nodes) with the first contact's delta_max from `dense_peak`."""
     c = contacts(t[:cnt], d[:cnt], fl[:cnt], f[:cnt], R)
     end = _first_end(fl[:cnt])
     if end > 2:
-        c[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p)
+        c[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, peak_state)
     return c
 
 #: the observed ratio r = |x_2h - x_4h| / |x_h - x_2h| is trusted only up to r / RATIO_SAFETY: before the scheme is

@@ -212,3 +212,33 @@ def test_contact_equation_root_is_exact_to_roundoff():
             exact = float((lo + hi) / 2)
             worst = max(worst, abs(got - exact) / exact)
     assert worst <= 4.5e-16, worst
+
+
+@pytest.mark.parametrize("name", ["beam_ss_midspan", "modal_two_mode", "heavy_ball_slender_beam"])
+def test_dense_peak_from_the_runs_kept_state_equals_the_sweep_from_touch(name):
+    """run(peak_state=...) keeps the modes' state at the node before the first contact's largest node; dense_peak
+    started there gives the peak the full sweep from touch gives (to roundoff), with that node the largest one, for
+    the fine run (energy kept) and a coarse-style run (energy None)."""
+    from impactval.reference.solve import _select, structure_modes
+
+    scene = impactval.load_scene(name)
+    md = structure_modes(scene, 40 if scene.target.kind == "beam" else None)
+    omega, g, ew = _select(md)
+    m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+    pl = plate_impact(m0, alpha, v0)
+    H = pl.t_m / 37.0
+    J = 8
+    Er, Ei, Kr, Ki, S = kernel.moments(omega, g, 4.0 * H, J + 2, P_DEGREE)
+    for energy in (True, None):
+        pk = np.full(2 * len(ew) + 1, np.nan)
+        st, cnt, t, d, f, x, u, e, fl = kernel.run(ew, m0, alpha, v0, md.residual_flexibility, H, J, P_DEGREE,
+                                                   0.2 * pl.t_m, 0.0, Er, Ei, Kr, Ki, S, 4000, 2, None, 0.0, energy, pk)
+        assert st == kernel.STATUS_OK
+        end = kernel._first_end(fl[:cnt])
+        assert int(pk[-1]) == int(np.argmax(d[:end]))
+        full = kernel.dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, md.residual_flexibility, alpha, m0,
+                                 P_DEGREE)
+        kept = kernel.dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, md.residual_flexibility, alpha, m0,
+                                 P_DEGREE, pk)
+        assert kept == pytest.approx(full, rel=1e-13, abs=0.0)
+        assert full >= np.max(d[:end]) * (1 - 1e-15)      # the dense peak is never below the largest node
