@@ -248,8 +248,11 @@ def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
     """Propagate every mode over one step, force polynomial of degree 5 (the scheme's p = 5), in one sweep
     the compiler vectorises: y_i <- e^{i omega_i eta} y_i + sum_l K_{l,i} coef_l (er, ei [mode]: the step's
     e^{i omega eta}; kr, ki [l, mode]: its moment tables [m/N], all at table level jt; coef [N]: monomial coefficients of the force
-    on the step). Returns (sum_i ew_i |y_i|^2 (twice the modal energy [J]), sum_i Im(e^{i omega_i eta} y_i) [m] of the
-    new y: the free part of the next step's structure displacement if that step has the same size)."""
+    on the step). Returns (sum_i ew_i |y_i|^2 (twice the modal energy [J]; NaN with ew None: a run whose energy series
+    nobody reads, the 2H and 4H runs of an error estimate, where numba prunes the energy sum at compile time),
+    sum_i Im(e^{i omega_i eta} y_i) [m] of the new y: the free part of the next step's structure displacement if that
+    step has the same size). Inlined into `run` (a call per step cost ~8 % of a run: the tables' array structures
+    passed each time)."""
     c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
     emod = 0.0
     nxt = 0.0
@@ -264,31 +267,12 @@ def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
              + Ki[jt, 4, i] * c4 + Ki[jt, 5, i] * c5)
         yr[i] = a
         yi[i] = b
-        emod += ew[i] * (a * a + b * b)
+        if ew is not None:
+            emod += ew[i] * (a * a + b * b)
         nxt += er * b + ei * a
+    if ew is None:
+        emod = np.nan
     return emod, nxt
-
-
-@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
-def _sweep6_free(Er, Ei, Kr, Ki, jt, coef, yr, yi):
-    """`_sweep6` without the modal energy (a run whose energy series nobody reads: the 2H and 4H runs of an
-    error estimate); returns the next free displacement sum_i Im(e^{i omega_i eta} y_i) [m] only. Inlined into
-    `run` like `_sweep6` (a call per step cost ~8 % of a run: the tables' array structures passed each time)."""
-    c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
-    nxt = 0.0
-    for i in range(yr.shape[0]):
-        y_r = yr[i]
-        y_i = yi[i]
-        er = Er[jt, i]
-        ei = Ei[jt, i]
-        a = (er * y_r - ei * y_i + Kr[jt, 0, i] * c0 + Kr[jt, 1, i] * c1 + Kr[jt, 2, i] * c2 + Kr[jt, 3, i] * c3
-             + Kr[jt, 4, i] * c4 + Kr[jt, 5, i] * c5)
-        b = (er * y_i + ei * y_r + Ki[jt, 0, i] * c0 + Ki[jt, 1, i] * c1 + Ki[jt, 2, i] * c2 + Ki[jt, 3, i] * c3
-             + Ki[jt, 4, i] * c4 + Ki[jt, 5, i] * c5)
-        yr[i] = a
-        yi[i] = b
-        nxt += er * b + ei * a
-    return nxt
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -556,8 +540,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             if energy is not None:
                 emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
             else:
-                emod = np.nan
-                free_acc = _sweep6_free(Er, Ei, Kr, Ki, jt, coef, yr, yi)
+                emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, None)
         else:
             emod, free_acc = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
         free_jt = jt
@@ -839,7 +822,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
         jt = j0 + int(np.round(np.log2(H / eta)))
         if k <= k_lo:
             if p == 5:
-                _sweep6_free(Er, Ei, Kr, Ki, jt, coef, yr, yi)
+                _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, None)
             else:
                 _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, p)
             continue
@@ -849,7 +832,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
         for q in range(nq):
             _shift(coef, float(q), 1.0 / nq, sub)
             if p == 5:
-                _sweep6_free(Er, Ei, Kr, Ki, js, sub, yr, yi)
+                _sweep6(Er, Ei, Kr, Ki, js, sub, yr, yi, None)
             else:
                 _sweep(Er, Ei, Kr, Ki, js, sub, yr, yi, ew, p)
             x2 = 0.0
