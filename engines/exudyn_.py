@@ -282,6 +282,7 @@ class ExudynAdapter(EngineAdapter):
             om = modal_omega_max(structure.omega, np.diag(structure.mass_reduced), structure.phi_contact,
                                  scene.ball.mass, k)
         integ = settings.integrator or self.integrators[0]
+        diag["integrator"] = integ          # also on a row refused before stepping (its series in a sweep)
         bound = {"explicit-euler": 2.0, "rk44": 2.0 * math.sqrt(2.0), "rk67": 3.0}.get(integ, 2.0)
         return Plan(bound / om, f"{integ}, modal body + ball + contact spring {k:.3g} N/m", err, diag)
 

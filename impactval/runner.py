@@ -192,10 +192,11 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         schema_version=SCHEMA_VERSION, job_key=job_key, run_id=run_id, scene=scene.name,
         scene_hash=scene_hash(scene), engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
-        integrator=rs.get("integrator") or settings.integrator or "", dt=dt,
-        # structure size: chain segments, or the mode count of a modal (FFRF) body
-        segments=str(next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
-                           if v not in (None, "", 0)), "")),
+        integrator=rs.get("integrator") or settings.integrator or diag.get("integrator") or "", dt=dt,
+        # structure size: chain segments, or the mode count of a modal (FFRF) body; a row refused before
+        # stepping has the planned size in its diagnostics (so it joins its series: sweep's stability table)
+        segments=str(next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes,
+                                        diag.get("segments")) if v not in (None, "", 0)), "")),
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
@@ -721,7 +722,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         notes = export(db, out)
         # report.md + figures + report.html, from the store (presentation lives in reports/)
         write_report(db, run_id, out, rows=df, cmp=cmp, baseline=None if baseline is None else f"`{baseline}`",
-                     checks=threshold, settings=settings, tol=tol, extra_md=extra)
+                     checks=threshold, settings=settings, tol=tol, extra_md=extra,
+                     scenes={s.name: s for s in scene_objs})
     df.attrs["notes"] = notes
     info = db.run_info(run_id)
     df.attrs.update(run_id=info["id"], n_reused=info["n_reused"], status=info["status"])

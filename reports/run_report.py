@@ -138,7 +138,20 @@ def text_table(df: pd.DataFrame) -> str:
         return "  ".join(x.rjust(w) if r else x.ljust(w) for x, w, r in zip(items, widths, right)).rstrip()
 
     notes = [f"  ! {scene} / {engine}: {note}" for scene, engine, note in _noted(df)]
-    return "\n".join([line(header), *(line(c) for c in cells), *notes])
+    return "\n".join([line(header), *(line(c) for c in cells), *notes, *_unresolved(df)])
+
+
+def _unresolved(df: pd.DataFrame) -> list[str]:
+    """`  - scene / engine: status: message` per row without a result (skipped, unstable, ...): the terminal
+    names the reason, the limit and the fix, as the report's "Rows without a result" does."""
+    if "message" not in df or "status" not in df:
+        return []
+    out = []
+    for _, r in df.iterrows():
+        msg = r["message"]
+        if str(r["status"]) != "ok" and isinstance(msg, str) and msg.strip():
+            out.append(f"  - {r['scene']} / {r['engine']}: {r['status']}: {' '.join(msg.split())}")
+    return out
 
 
 def _md_table(header: list[str], cells: Iterable[list[str]], right: list[bool] | None = None) -> list[str]:

@@ -339,7 +339,8 @@ def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) 
         ax.set_yscale("log")
         _log_axes(ax, "cost: stepping wall time [s]", "largest |error| [%]")
         ax.set_title(f"{scene}: error vs cost (front circled)", fontsize=10)
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
+        if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
     fig.tight_layout()
     paths = _save(fig, Path(stem))
     plt.close(fig)
@@ -401,7 +402,8 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
         ax.set_yscale("log")
         _log_axes(ax, "time step dt [s]", "|error| [%]")
         ax.set_title(f"{scene} / {engine}", fontsize=10, color=colour)
-        ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
+        if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none
+            ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
     for ax in list(axes.flat)[len(pairs):]:
         ax.set_visible(False)
     fig.tight_layout()
