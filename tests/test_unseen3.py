@@ -15,6 +15,7 @@ through every command at its defaults. What broke, each check on the scene that 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -223,3 +224,17 @@ def test_theory_verdict_follows_the_spectrum_when_it_is_clear():
     assert 0.0 < df["structure_err_f_m"].iloc[0] < df["theory_gap_f_m"].iloc[0]     # moved toward EB
     text = "\n".join(error_source_section(df))
     assert "follows Timoshenko's spectrum" in text and "closer to Euler-Bernoulli's" not in text, text
+
+
+def test_theory_page_says_n_a_where_first_order_theory_has_no_answer(tmp_path):
+    """The light strongly coupled mode shifts f_m by -112 % at first order: no first-order answer. The theory page
+    printed `nan | nan | nan | +nan %` rows (README: "gives no answer (n/a)"; never a NaN as an answer)."""
+    pytest.importorskip("matplotlib")
+    from impactval.cli import main
+
+    res = CliRunner().invoke(main, ["theory", _path("modal_light_coupled"), "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    page = (tmp_path / "theory_modal_light_coupled.md").read_text()
+    assert not re.search(r"\bnan\b", page, re.IGNORECASE), page
+    row = next(ln for ln in page.splitlines() if ln.startswith("| Hertz, first order in s"))
+    assert row.count("n/a") == 6, row
