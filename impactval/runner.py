@@ -195,7 +195,7 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         integrator=rs.get("integrator") or settings.integrator or diag.get("integrator") or "", dt=dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body; a row refused before
         # stepping has the planned size in its diagnostics (so it joins its series: sweep's stability table)
-        segments=str(next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes,
+        segments=str(next((v for v in (rs.get("segments"), rs.get("modes"), settings.segments, settings.modes,
                                         diag.get("segments")) if v not in (None, "", 0)), "")),
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,

@@ -238,3 +238,41 @@ def test_theory_page_says_n_a_where_first_order_theory_has_no_answer(tmp_path):
     assert not re.search(r"\bnan\b", page, re.IGNORECASE), page
     row = next(ln for ln in page.splitlines() if ln.startswith("| Hertz, first order in s"))
     assert row.count("n/a") == 6, row
+
+
+def test_exudyn_segments_size_the_fe_beam_and_are_refused_on_the_solid():
+    """`sweep cantilever_timo_03 --engines pybullet,exudyn --segments pybullet.11,35` gave Exudyn segments = 35,
+    which it ignored (its solid is sized by modes): rows said N = 35 with the default model's numbers. Now the
+    fe-beam takes segments as its element count, the solid refuses them (skipped, with the fix), and a row's N
+    is what the engine used before what was asked."""
+    pytest.importorskip("exudyn", reason="pip install 'impactval[exudyn]'")
+    res = execute_job("exudyn", _scene("cantilever_timo_03"), EngineSettings(segments=35))
+    assert res.status == "skipped" and "sized by --modes" in res.message and "pybullet.11,pybullet.35" in res.message
+    beam = _scene("ss_glass_wc_fast")
+    res = execute_job("exudyn", beam, EngineSettings(segments=8))
+    assert res.status == "ok" and res.settings["segments"] == 8
+    default = execute_job("exudyn", beam, EngineSettings())
+    assert default.settings["segments"] == 19 and res.model_error > 10 * default.model_error   # a coarser mesh
+    res = execute_job("exudyn", beam, EngineSettings(segments=8, options=(("beam_elements", 9),)))
+    assert res.status == "skipped" and "disagree" in res.message
+
+
+@pytest.mark.slow
+def test_sweep_text_never_prints_nan_or_an_empty_limit(tmp_path):
+    """Exudyn on the Timoshenko cantilever: every cell skipped printed "best nan %" and "up to  s"; its implicit
+    integrator (dt_limit inf) printed "predicted limit  s"."""
+    pytest.importorskip("exudyn", reason="pip install 'impactval[exudyn]'")
+    from impactval.cli import main
+
+    runner = CliRunner()
+    args = ["sweep", _path("cantilever_timo_03"), "--engines", "exudyn", "--dt", "4e-7,2e-7", "-j", "1"]
+    res = runner.invoke(main, [*args, "--segments", "35", "--out", str(tmp_path / "skipped")])
+    assert res.exit_code == 0, res.output
+    md = (tmp_path / "skipped" / "sweep.md").read_text()
+    assert "no cell has a result" in md and "no cell has a result" in res.output
+    res = runner.invoke(main, [*args, "--out", str(tmp_path / "ok")])
+    assert res.exit_code == 0, res.output
+    md += (tmp_path / "ok" / "sweep.md").read_text()
+    assert "no explicit stability limit (implicit integrator)" in md
+    for bad in (r"\bnan\b", r"up to  s", r"limits?  s"):
+        assert not re.search(bad, md + res.output, re.IGNORECASE), bad
