@@ -204,6 +204,9 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         if not scene_objs:
             tags = sorted({t for n in catalogue_names() for t in impactval_tags(n)})
             raise ImpactvalError(f"--suite {suite!r}: no catalogue scene carries this tag; tags: {', '.join(tags)}.")
+    from impactval.runner import unique_scenes
+
+    scene_objs = unique_scenes(scene_objs)          # two different scenes with one name: refused before any write
     if engines is None:
         specs = [n for n, s in engine_status().items() if s == "ok"]
         if not specs:

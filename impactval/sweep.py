@@ -161,11 +161,11 @@ def build_jobs(scenes: Iterable, engines: Iterable[str], base, *, dt: dict[str, 
     no structure: its segments and modes axes collapse to the default.
     """
     from impactval.engines.base import EngineSettings  # noqa: F401 - the settings type of `base`
-    from impactval.runner import settings_for
+    from impactval.runner import settings_for, unique_scenes
 
     engines = list(engines)
     jobs = []
-    for scene in scenes:
+    for scene in unique_scenes(scenes):
         rigid = getattr(scene.target, "kind", "") == "rigid-plate"      # no structure to size
         for eng in engines:
             ints = (integrator or {}).get(eng) or [base.integrator]

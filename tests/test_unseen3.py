@@ -291,3 +291,26 @@ def test_section_chain_is_sized_by_discretisation_not_by_the_rayleigh_shift():
     again = model_error(scene, hencky_chain(scene.target, sized.n, "section"))
     assert again.largest == pytest.approx(sized.model_error.largest, rel=1e-9)   # the chain as built
     assert segments_for(scene).n == 40          # the bar chain (MuJoCo centres the impact point in a segment: 41)
+
+
+@pytest.mark.parametrize("command", ["run", "sweep", "nightly"])
+def test_two_different_scenes_with_one_name_are_refused_before_any_write(tmp_path, command):
+    """The glass-beam file and a copy at 2 m/s, both named ss_glass_wc_fast by their stem, ran as two rows that
+    nothing told apart (the report showed one reference for both). Refused with one line (exit 2), nothing
+    written; the same scene twice runs once."""
+    from impactval.cli import main
+
+    copy = tmp_path / "elsewhere" / "ss_glass_wc_fast.toml"
+    copy.parent.mkdir()
+    copy.write_text(Path(_path("ss_glass_wc_fast")).read_text().replace("velocity = 5.0", "velocity = 2.0"))
+    out = tmp_path / "out"
+    extra = ["--dt", "1e-7"] if command == "sweep" else []
+    res = CliRunner().invoke(main, [command, _path("ss_glass_wc_fast"), str(copy), "--engines", "mujoco",
+                                    "--out", str(out), *extra])
+    assert res.exit_code == 2, res.output
+    assert "two different scenes are named 'ss_glass_wc_fast'" in res.output and "Traceback" not in res.output
+    assert not out.exists()
+    from impactval.runner import unique_scenes
+
+    same = [_scene("rigid_pmma_glass_fast"), _scene("rigid_pmma_glass_fast")]
+    assert len(unique_scenes(same)) == 1
