@@ -91,6 +91,8 @@ def main(full: bool = False) -> None:
         rows.append((n, t_solve, max(abs(err.t_m), abs(err.f_m), abs(err.delta_m))))
         print(f"  solve(tol=1e-6), {n:5d} modes: {_us(t_solve)}   real max rel. error {rows[-1][2]:.1e}"
               f" ({res.n_steps} nodes; its bound is conservative)")
+        if n == 160:
+            wrapper_share(base, res, t_solve)
         # matched accuracy, tuned like DOP853 below: the loosest tol whose real error is still <= 1e-6
         for tol in (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6):
             r = impactval.solve(base, modes=n, tol=tol)
@@ -166,6 +168,33 @@ def main(full: bool = False) -> None:
           f"{rss_mb:.0f} MB, {contacts} contacts   (target < 60 s, < 2048 MB)")
 
 
+def _auto_args(md, m0: float, alpha: float, v0: float, tol: float, light: bool = True) -> tuple:
+    """The arguments solve_modes passes to kernel.solve_auto for modes `md` at `tol` (window 0); `light` False
+    leaves out the light-mode coupling argument (kernels before it existed)."""
+    omega, g, ew = ref_solve._select(md)
+    plate = plate_impact(m0, alpha, v0)
+    n0 = max(8.0, ref_solve._N_ANCHOR * (8.0 * ref_solve._ERR_ANCHOR / tol) ** (1.0 / (ref_solve.P_DEGREE + 1)))
+    args = (omega, g, ew, m0, alpha, v0, md.residual_flexibility, tol, 0.0, plate.t_m, plate.delta_m,
+            ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW, n0, ref_solve.ESTIMATE_ORDER, ref_solve.UNRESOLVED_THETA,
+            ref_solve.UNRESOLVED_C, ref_solve.SMALLEST_STEP_FACTOR, ref_solve.UNRESOLVED_SHARE,
+            ref_solve.node_cap(len(omega)), float(kernel.SERIES_SAMPLES))
+    return args + (ref_solve.LIGHT_COUPLING,) if light else args
+
+
+def wrapper_share(base, res, t_solve: dict[str, float]) -> None:
+    """Where a solve(tol=1e-6, modes=160) call goes: the compiled kernel (kernel.solve_auto on the arguments
+    solve passes it) against the whole call, measured right after it; the rest is Python (argument checks, the
+    mode and scene caches, the validity warnings, building the result)."""
+    m0, alpha, v0 = base.ball.mass, base.alpha, base.ball.velocity
+    args = _auto_args(structure_modes(base, 160), m0, alpha, v0, 1e-6)
+    out = kernel.solve_auto(*args)
+    assert out[1] - 1 == res.n_steps, "the kernel call is not the one solve makes"
+    t_kernel = both_times(lambda: kernel.solve_auto(*args))
+    rest = {c: t_solve[c] - t_kernel[c] for c in t_solve}
+    print(f"    of which kernel.solve_auto:  {_us(t_kernel)}   the Python around it: {rest['cpu'] * 1e6:.1f} us CPU "
+          f"({100 * rest['cpu'] / t_solve['cpu']:.0f} % of the call)")
+
+
 def _kernel_at(rev: str):
     """reference/kernel.py of git revision `rev`, imported as its own module (compiled in a temporary folder)."""
     root = Path(__file__).resolve().parents[1]
@@ -186,15 +215,9 @@ def before_after(rev: str, rounds: int = 15) -> None:
     base = impactval.load_scene("beam_ss_midspan")
     md = structure_modes(base, 160)
     m0, alpha, v0 = base.ball.mass, base.alpha, base.ball.velocity
-    omega, g, ew = ref_solve._select(md)
-    plate = plate_impact(m0, alpha, v0)
     print(f"\nkernel.solve_auto before ({rev}) and now, 160 modes, interleaved ({rounds} rounds, best of each):")
     for tol in (1e-4, 1e-6):
-        n0 = max(8.0, ref_solve._N_ANCHOR * (8.0 * ref_solve._ERR_ANCHOR / tol) ** (1.0 / (ref_solve.P_DEGREE + 1)))
-        args = (omega, g, ew, m0, alpha, v0, md.residual_flexibility, tol, 0.0, plate.t_m, plate.delta_m,
-                ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW, n0, ref_solve.ESTIMATE_ORDER, ref_solve.UNRESOLVED_THETA,
-                ref_solve.UNRESOLVED_C, ref_solve.SMALLEST_STEP_FACTOR, ref_solve.UNRESOLVED_SHARE,
-                ref_solve.node_cap(len(omega)), float(kernel.SERIES_SAMPLES))
+        args = _auto_args(md, m0, alpha, v0, tol, light=False)
         outs = [k.solve_auto(*args) for k in (old, kernel)]
         # t_m, delta_m of the first contact and the relative uncertainty, before vs now
         vals = [(o[9][0, 1] - o[9][0, 0], o[9][0, 2], o[10]) for o in outs]

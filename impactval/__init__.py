@@ -17,7 +17,7 @@ def load_scene(name_or_path):
 
 _SOLVE_OPTIONS = ("window", "modes", "static_correction")
 _SOLVE_OPTION_SET = frozenset(_SOLVE_OPTIONS)
-_SOLVE_IMPL: list = []          # (checks module, reference solve), imported on the first call
+_SOLVE_IMPL: list = []          # (checks module, reference solve, scene loader), imported on the first call
 
 
 def solve(scene, tol: float = 1e-6, **kwargs):
@@ -30,21 +30,23 @@ def solve(scene, tol: float = 1e-6, **kwargs):
     if not _SOLVE_IMPL:
         from impactval import checks
         from impactval.reference.solve import solve as _solve
+        from impactval.scenarios.scene import load_scene as _load
 
-        _SOLVE_IMPL[:] = [checks, _solve]
-    checks, _solve = _SOLVE_IMPL
-    if not _SOLVE_OPTION_SET.issuperset(kwargs):
-        unknown = sorted(set(kwargs) - _SOLVE_OPTION_SET)
-        raise ImpactvalError(f"solve() has no option {unknown[0]!r}; options: tol, {', '.join(_SOLVE_OPTIONS)}.")
-    opts = dict(kwargs)
-    if "window" in opts:
-        opts["window"] = checks.check_window(opts["window"])
-    if "modes" in opts:
-        opts["modes"] = checks.check_modes(opts["modes"])
-    if "static_correction" in opts:
-        opts["static_correction"] = checks.check_flag(opts["static_correction"], "static_correction")
-    tol, scene, kwargs = checks.check_tol(tol), load_scene(scene), opts
-    return _solve(scene, tol=tol, **kwargs)
+        _SOLVE_IMPL[:] = [checks, _solve, _load]
+    checks, _solve, _load = _SOLVE_IMPL
+    if kwargs:
+        if not _SOLVE_OPTION_SET.issuperset(kwargs):
+            unknown = sorted(set(kwargs) - _SOLVE_OPTION_SET)
+            raise ImpactvalError(f"solve() has no option {unknown[0]!r}; options: tol, {', '.join(_SOLVE_OPTIONS)}.")
+        if "window" in kwargs:
+            kwargs["window"] = checks.check_window(kwargs["window"])
+        if "modes" in kwargs and not ((m := kwargs["modes"]).__class__ is int and 1 <= m <= checks.MAX_MODES):
+            kwargs["modes"] = checks.check_modes(m)
+        if "static_correction" in kwargs:
+            kwargs["static_correction"] = checks.check_flag(kwargs["static_correction"], "static_correction")
+    if not (tol.__class__ is float and 1e-12 <= tol <= 0.1):      # a float in range passes at a glance
+        tol = checks.check_tol(tol)
+    return _solve(_load(scene), tol=tol, **kwargs)
 
 
 def structure_modes(scene, n=None):

@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from impactval.errors import ImpactvalError
 from impactval.reference import kernel
 from impactval.reference.beams import Modes, beam_modes
 from impactval.reference.hertz import plate_impact
-from impactval.reference.result import Contact, ImpactResult, Metrics
+from impactval.reference.result import Contact, ImpactResult, Metrics, build
 from impactval.reference.validity import hertz_validity
 
 #: polynomial degree of the force interpolation (order of the scheme: P_DEGREE + 1)
@@ -129,10 +130,11 @@ def integrate(modes: Modes, mass: float, alpha: float, v0: float, n_steps: float
 
 def _make_run(alpha, t, d, f, x, u, e, table, end: int, drift: float) -> Run:
     """A Run from the kernel's series and contact table (rows t_start, t_end, delta_max)."""
-    contacts = tuple(Contact(a, b, alpha * c**1.5, c) for a, b, c in np.asarray(table).tolist())
+    contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
     first = contacts[0]
-    return Run(Metrics(first.t_end - first.t_start, first.f_max, first.delta_max), len(t) - 1,
-               t, d, f, x, u, e, contacts, -float(u[end]), drift)
+    return build(Run, {"metrics": Metrics(first.t_end - first.t_start, first.f_max, first.delta_max),
+                       "n_steps": len(t) - 1, "t": t, "delta": d, "f": f, "x_ball": x, "u_ball": u, "energy": e,
+                       "contacts": contacts, "rebound_velocity": -float(u[end]), "energy_error": drift})
 
 
 #: the smallest step H/2^J is ~(SMALLEST_STEP_FACTOR tol)^0.4 t_plate. The first step's force is approximated
@@ -183,6 +185,17 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
     (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
+    t, d, f, x, u, e, table, rel, end, drift = _solve_series(modes, mass, alpha, v0, tol, window, series_samples)
+    run = _make_run(alpha, t, d, f, x, u, e, table, end, drift)
+    m = run.metrics
+    return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+
+
+def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float, window: float,
+                  series_samples: float = kernel.SERIES_SAMPLES):
+    """solve_modes' kernel call and refusals: (t, delta, f, x_ball, u_ball, energy series, contact table rows
+    (t_start, t_end, delta_max), relative uncertainty, index of the node ending the first contact, largest
+    |E/E0 - 1|)."""
     plate = _plate(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
@@ -202,9 +215,7 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
             f"the first contact needs more than {cap} steps (it lasts far longer than the rigid-plate "
             f"contact time {plate.t_m:.3g} s): the structure is far softer than the contact (ball mass "
             f"{mass:.3g} kg); refused to stay within memory: use a lighter ball, a stiffer target or a looser tol")
-    run = _make_run(alpha, t, d, f, x, u, e, fine, end, drift)
-    m = run.metrics
-    return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
+    return t, d, f, x, u, e, fine, rel, end, drift
 
 
 #: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
@@ -271,49 +282,93 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         hint = f" (call impactval.solve(impactval.load_scene({scene!r})))" if isinstance(scene, str) else ""
         raise ImpactvalError(f"solve() needs a Scene from impactval.load_scene(), got {type(scene).__name__} "
                              f"{scene!r:.60}{hint}.")
-    tol = _check_tol(tol)
-    if isinstance(window, bool) or not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
-        raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
-    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, int) or modes < 1):
-        raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
-    if scene.target.kind == "ball":     # two free spheres: the relative motion is a ball on a rigid plate
+    # the common argument types pass at a glance; anything else gets the full checks and their messages
+    if not (tol.__class__ is float and 1e-12 <= tol <= 0.1):
+        tol = _check_tol(tol)
+    if not (window.__class__ is float and 0.0 <= window < math.inf):
+        if isinstance(window, bool) or not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
+            raise ImpactvalError(f"window must be a non-negative time in s, got {window!r}.")
+    if modes is not None and not (modes.__class__ is int and modes >= 1):
+        if isinstance(modes, bool) or not isinstance(modes, int) or modes < 1:
+            raise ImpactvalError(f"modes must be a positive whole number, got {modes!r}.")
+    target = scene.target
+    if target.kind == "ball":     # two free spheres: the relative motion is a ball on a rigid plate
         from impactval.reference.spheres import equivalent_plate_scene, two_sphere_result
 
         return two_sphere_result(scene, solve(equivalent_plate_scene(scene), tol, window))
     t0 = time.perf_counter()
     ball = scene.ball
     mass, alpha, v0 = ball.mass, scene.alpha, ball.velocity
-    target = scene.target
     fixed = modes if modes is not None else getattr(target, "modes", None)
     model = "hertz-rigid" if target.kind == "rigid-plate" else "hertz-modal"
     if target.kind in ("beam", "plate") and fixed is None:
         run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
         unc = Metrics(unc.t_m + trunc.t_m, unc.f_m + trunc.f_m, unc.delta_m + trunc.delta_m)
         model += "+static" if static_correction else ""
-    else:
-        md = structure_modes(scene, fixed)
-        run, unc = solve_modes(md, mass, alpha, v0, tol, window)
+        m = run.metrics
+        t_m, f_m, delta_m = m.t_m, m.f_m, m.delta_m
+        t, f, delta, x_ball, energy = run.t, run.f, run.delta, run.x_ball, run.energy
+        contacts, rebound, drift, n_steps = run.contacts, run.rebound_velocity, run.energy_error, run.n_steps
+    else:       # solve_modes without its Run (the same numbers, fewer objects per call)
+        md = _target_modes(scene, fixed)
+        t, delta, f, x_ball, u, energy, table, rel, end, drift = _solve_series(md, mass, alpha, v0, tol, window)
         n_modes = md.n
-    m = run.metrics
-    values = (m.t_m, m.f_m, m.delta_m, unc.t_m, unc.f_m, unc.delta_m, run.rebound_velocity)
-    if not all(map(math.isfinite, values)) or min(m.t_m, m.f_m, m.delta_m) <= 0.0:
+        contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
+        first = contacts[0]
+        t_m, f_m, delta_m = first.t_end - first.t_start, first.f_max, first.delta_max
+        m = Metrics(t_m, f_m, delta_m)
+        unc = Metrics(rel * t_m, rel * f_m, rel * delta_m)
+        rebound, n_steps = -float(u[end]), len(t) - 1
+    if not (math.isfinite(t_m) and math.isfinite(f_m) and math.isfinite(delta_m) and math.isfinite(unc.t_m)
+            and math.isfinite(unc.f_m) and math.isfinite(unc.delta_m) and math.isfinite(rebound)) \
+            or min(t_m, f_m, delta_m) <= 0.0:
         raise ImpactvalError(f"scene {scene.name!r}: the reference solver got a non-finite or non-positive answer "
-                             f"(t_m={m.t_m!r}, f_m={m.f_m!r}, delta_m={m.delta_m!r}): an input is outside the range "
+                             f"(t_m={t_m!r}, f_m={f_m!r}, delta_m={delta_m!r}): an input is outside the range "
                              f"double precision can carry (check the ball's and target's sizes, masses and "
                              f"frequencies).")
-    validity = hertz_validity(scene, m.f_m, m.delta_m)
+    validity = hertz_validity(scene, f_m, delta_m)
     rel = _rel(unc, m)
     if rel > tol * (1 + 1e-9):
         validity += (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the mode count or step "
                      f"reached its limit",)
-    return ImpactResult(
-        scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m, validity=validity,
-        uncertainty=unc, modes=n_modes, t=run.t, f=run.f, delta=run.delta, x_ball=run.x_ball,
-        x_structure=run.x_ball - run.delta, energy=run.energy, rebound_velocity=run.rebound_velocity,
-        energy_error=run.energy_error, contacts=run.contacts,
-        settings={"tol": tol, "window": window, "p": P_DEGREE}, n_steps=run.n_steps,
-        wall_time_step_s=time.perf_counter() - t0,
-    )
+    return build(ImpactResult, {
+        "scene": scene.name, "source": "reference", "model": model, "t_m": t_m, "f_m": f_m, "delta_m": delta_m,
+        "validity": validity, "uncertainty": unc, "modes": n_modes, "t": t, "f": f, "delta": delta,
+        "x_ball": x_ball, "x_structure": x_ball - delta, "energy": energy, "rebound_velocity": rebound,
+        "energy_error": drift, "contacts": contacts, "settings": {"tol": tol, "window": window, "p": P_DEGREE},
+        "n_steps": n_steps, "wall_time_step_s": time.perf_counter() - t0})
+
+
+def _target_modes(scene, n: int | None) -> Modes:
+    """structure_modes(scene, n) with a front cache per target object: the structure cache keys on the target's
+    value, whose hash walks every field of the target and its material on each call (~1.5 us); this one checks
+    identity. A target is kept only when it is a frozen dataclass with a frozen material and hashable (nothing
+    in it can change); the cache holds the target, so its id cannot be reused while cached."""
+    target = scene.target
+    key = (id(target), n)
+    hit = _MODES_BY_TARGET.get(key)
+    if hit is not None and hit[0] is target:
+        return hit[1]
+    md = structure_modes(scene, n)
+    if _immutable(target):
+        if len(_MODES_BY_TARGET) > 64:
+            _MODES_BY_TARGET.clear()
+        _MODES_BY_TARGET[key] = (target, md)
+    return md
+
+
+_MODES_BY_TARGET: dict = {}
+
+
+def _immutable(target) -> bool:
+    parts = (target, getattr(target, "material", None))
+    if not all(dataclasses.is_dataclass(p) and type(p).__dataclass_params__.frozen for p in parts):
+        return False
+    try:
+        hash(target)
+    except TypeError:
+        return False
+    return True
 
 
 #: with the residual static flexibility of the dropped modes, the truncation error of an n-mode model falls per

@@ -41,30 +41,57 @@ def hertz_validity(scene, f_m: float, delta_m: float) -> tuple[str, ...]:
     """Warnings where a result (peak force f_m [N], peak approach delta_m [m]) leaves Hertz's assumptions."""
     if not (math.isfinite(f_m) and math.isfinite(delta_m)) or delta_m <= 0.0:
         return ()
-    out = []
-    radius = effective_radius(scene.alpha, scene.e_star)
+    radius, sizes, a_limit, yields, p0_limit = _scene_limits(scene)
     ratio = delta_m / radius
-    a, p0 = contact_size(scene, f_m, delta_m)
+    a = math.sqrt(radius * delta_m)                # contact_size, with the scene's R computed once
+    p0 = 1.5 * f_m / (math.pi * a * a)
+    if ratio <= HERTZ_DELTA_OVER_R and a <= a_limit and p0 <= p0_limit:
+        return ()                                  # (NaN comparisons fall through to the checks one by one)
+    out = []
     if ratio > HERTZ_DELTA_OVER_R:
         out.append(f"Hertz: delta_m is {100 * ratio:.3g} % of the contact radius of curvature R = {radius:.3g} m "
                    f"(a/R = {a / radius:.2g}), above the {100 * HERTZ_DELTA_OVER_R:g} % where small-strain "
                    f"Hertz theory holds")
-    target = scene.target
-    over = [f"{100 * a / size:.3g} % of its {name} {size:.3g} m" for name in ("width", "height", "thickness")
-            if isinstance(size := getattr(target, name, None), (int, float)) and size > 0
-            and a > HERTZ_SIZE_FRACTION * size]
+    over = [f"{100 * a / size:.3g} % of its {name} {size:.3g} m" for name, size in sizes
+            if a > HERTZ_SIZE_FRACTION * size]
     if over:
         out.append(f"Hertz: contact radius a = {a:.3g} m is {' and '.join(over)} (> {100 * HERTZ_SIZE_FRACTION:g} % of "
                    f"the target's size): the half-space assumption fails")
-    ball_mat, target_mat = scene.ball.material, target.material
-    pairs = [("ball and target", ball_mat)] if ball_mat == target_mat else [("ball", ball_mat), ("target", target_mat)]
-    for who, mat in pairs:
-        y = getattr(mat, "yield_stress", None)
-        if y and p0 > YIELD_P0_OVER_Y * y:
+    for who, mat, y in yields:
+        if p0 > YIELD_P0_OVER_Y * y:
             out.append(f"yield: peak contact pressure p0 = {p0 / 1e9:.3g} GPa exceeds {YIELD_P0_OVER_Y:g} x the "
                        f"yield stress of the {who} ({mat.name}, {y / 1e9:.3g} GPa): plastic flow starts at "
                        f"p0 = {YIELD_P0_OVER_Y:g} Y, so the elastic f_m and rebound are upper bounds")
     return tuple(out)
+
+
+def _scene_limits(scene):
+    """What hertz_validity needs of a scene alone: (R [m], the target's (name, size [m]) pairs, the smallest
+    HERTZ_SIZE_FRACTION x size [m] (inf: none), the (who, material, yield stress [Pa]) to check, the smallest
+    YIELD_P0_OVER_Y x yield stress [Pa] (inf: none)). Kept per scene object (repeated solves) when the scene is
+    immutable all the way down (frozen dataclasses, hashable: scenarios.scene's rule), else computed each call."""
+    hit = _LIMITS.get(id(scene))
+    if hit is not None and hit[0] is scene:
+        return hit[1]
+    radius = effective_radius(scene.alpha, scene.e_star)
+    target = scene.target
+    sizes = tuple((name, size) for name in ("width", "height", "thickness")
+                  if isinstance(size := getattr(target, name, None), (int, float)) and size > 0)
+    ball_mat, target_mat = scene.ball.material, target.material
+    pairs = [("ball and target", ball_mat)] if ball_mat == target_mat else [("ball", ball_mat), ("target", target_mat)]
+    yields = tuple((who, mat, y) for who, mat in pairs if (y := getattr(mat, "yield_stress", None)))
+    out = (radius, sizes, min((HERTZ_SIZE_FRACTION * size for _, size in sizes), default=math.inf), yields,
+           min((YIELD_P0_OVER_Y * y for _, _, y in yields), default=math.inf))
+    from impactval.scenarios.scene import _all_frozen
+
+    if _all_frozen(scene):
+        if len(_LIMITS) > 256:
+            _LIMITS.clear()
+        _LIMITS[id(scene)] = (scene, out)        # holds the scene: its id cannot be reused while cached
+    return out
+
+
+_LIMITS: dict = {}
 
 
 def perturbation_validity(shift_t: float, shift_delta: float) -> tuple[tuple[str, ...], bool]:

@@ -117,3 +117,98 @@ def test_interleaved_solves_repeat_exactly():
     pa = plate_impact(a.ball.mass, a.alpha, a.ball.velocity)
     from impactval.reference.solve import _plate
     assert _plate(a.ball.mass, a.alpha, a.ball.velocity) == pa
+
+
+def test_build_makes_what_init_makes():
+    """result.build (the solver's cheap construction) gives the object the dataclass __init__ gives: the same fields
+    in the same order, defaults, fresh default-factory values per instance, __post_init__'s status conversion; bad
+    field names raise TypeError as __init__ does."""
+    import dataclasses
+
+    from impactval.reference.result import Contact, ImpactResult, Metrics, Status, build
+
+    kw = dict(scene="s", source="reference", model="hertz-modal", t_m=1e-4, f_m=2e3, delta_m=3e-6,
+              uncertainty=Metrics(1e-10, 1e-3, 1e-12), modes=7, t=np.arange(3.0), settings={"tol": 1e-6},
+              contacts=(Contact(0.0, 1e-4, 2e3, 3e-6),), status="ok", validity=("w",))
+    made, built = ImpactResult(**kw), build(ImpactResult, dict(kw))
+    assert list(vars(made)) == list(vars(built)) == [f.name for f in dataclasses.fields(ImpactResult)]
+    for name in vars(made):
+        a, b = getattr(made, name), getattr(built, name)
+        assert (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b or (a != a and b != b)), name   # NaN
+    assert built.status is Status.OK and built.success
+    other = build(ImpactResult, dict(kw))
+    assert other.diagnostics is not built.diagnostics and other.f is not built.f       # fresh factory values
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        built.t_m = 0.0
+    with pytest.raises(TypeError, match="no field 'tm'"):
+        build(Metrics, {"tm": 1.0, "f_m": 1.0, "delta_m": 1.0})
+    with pytest.raises(TypeError, match="needs field 'delta_m'"):
+        build(Metrics, {"t_m": 1.0, "f_m": 1.0})
+    assert build(Metrics, {"t_m": 1.0, "f_m": 2.0, "delta_m": 3.0}) == Metrics(1.0, 2.0, 3.0)
+
+
+def test_per_scene_caches_follow_the_scene():
+    """The per-target mode cache and the per-scene validity limits never hand one scene's data to another: two
+    scenes differing in one field (the beam's height; the ball's yield stress) solve as freshly built copies do,
+    also when solved in turn."""
+    import dataclasses
+
+    from impactval.reference.validity import hertz_validity
+
+    a = impactval.load_scene("beam_ss_midspan")
+    b = dataclasses.replace(a, target=dataclasses.replace(a.target, height=a.target.height * 1.5))
+    ra, rb, ra2 = (impactval.solve(s, tol=1e-6, modes=40) for s in (a, b, a))
+    assert rb.t_m != ra.t_m and (ra.t_m, ra.f_m, ra.delta_m) == (ra2.t_m, ra2.f_m, ra2.delta_m)
+    fresh_b = dataclasses.replace(b, name=b.name)            # another object, equal fields: no cache hit by identity
+    assert impactval.solve(fresh_b, tol=1e-6, modes=40).t_m == rb.t_m
+    # validity: the same result read against a ball that yields far sooner, and back
+    weak = dataclasses.replace(a.ball.material, name="weak", yield_stress=1e6)
+    c = dataclasses.replace(a, ball=dataclasses.replace(a.ball, material=weak))
+    warn_a, warn_c, warn_a2 = (hertz_validity(s, ra.f_m, ra.delta_m) for s in (a, c, a))
+    assert any("weak" in w for w in warn_c) and not any("weak" in w for w in warn_a) and warn_a == warn_a2
+
+
+def test_validity_of_a_mutable_scene_is_not_kept():
+    """A scene with a mutable part (a plain object as the ball's material) is checked afresh each call: changing
+    its yield stress in place changes the warnings."""
+    import dataclasses
+
+    from impactval.reference.validity import hertz_validity
+
+    a = impactval.load_scene("beam_ss_midspan")
+    r = impactval.solve(a, tol=1e-4, modes=20)
+
+    class Mat:                                    # equal to nothing else: ball and target are checked apart
+        name, young, poisson, yield_stress = "mutable", a.ball.material.young, a.ball.material.poisson, 1e12
+
+    m = Mat()
+    s = dataclasses.replace(a, ball=dataclasses.replace(a.ball, material=m))
+    assert not any("mutable" in w for w in hertz_validity(s, r.f_m, r.delta_m))
+    m.yield_stress = 1e6
+    assert any("mutable" in w for w in hertz_validity(s, r.f_m, r.delta_m))
+
+
+def test_contact_equation_root_is_exact_to_roundoff():
+    """kernel._solve_contact (Newton that skips the confirming step once the step is <= 2e-8 of the root) against
+    the root of delta + c delta^1.5 = D in 50-digit decimal arithmetic (bisection, independent of the kernel),
+    over c = B alpha spanning the structure-dominated (c sqrt(D) << 1) to the contact-dominated (>> 1) regime."""
+    from decimal import Decimal, getcontext
+
+    getcontext().prec = 50
+    worst = 0.0
+    for D in (1e-12, 3e-9, 1e-6, 2e-5, 1e-3):
+        for c_sqrtD in (1e-8, 1e-3, 0.1, 1.0, 7.0, 1e3, 1e8):
+            c = c_sqrtD / math.sqrt(D)
+            B, alpha = c / 1e10, 1e10
+            got = kernel._solve_contact(D, B, alpha)
+            Dd, cd = Decimal(D), Decimal(B) * Decimal(alpha)
+            lo, hi = Decimal(0), Dd
+            for _ in range(200):
+                mid = (lo + hi) / 2
+                if mid + cd * mid * mid.sqrt() > Dd:
+                    hi = mid
+                else:
+                    lo = mid
+            exact = float((lo + hi) / 2)
+            worst = max(worst, abs(got - exact) / exact)
+    assert worst <= 4.5e-16, worst
