@@ -61,6 +61,14 @@ def _col(r, key: str) -> Any:
     return r[key] if key in r else math.nan
 
 
+def _ran(r) -> bool:
+    """False for a row that never built or stepped (skipped, not installed, refused before stepping): its wall
+    times and steps are not measurements (they showed as 0.0 ms, 0 steps)."""
+    if str(r["status"]) in ("skipped", "not-installed"):
+        return False
+    return not (_num(_col(r, "n_steps")) == 0 and _num(_col(r, "wall_time_build_s")) == 0)
+
+
 #: (header, cell function, right-aligned) of the results table, in order
 _COLUMNS = (
     ("scene", lambda r: str(r["scene"]), False),
@@ -81,9 +89,9 @@ _COLUMNS = (
     ("C vs Warp t_m %", lambda r: _pct(_col(r, "vs_mujoco_c_t_m")), True),
     ("C vs Warp f_m %", lambda r: _pct(_col(r, "vs_mujoco_c_f_m")), True),
     ("C vs Warp delta_m %", lambda r: _pct(_col(r, "vs_mujoco_c_delta_m")), True),
-    ("build ms", lambda r: _ms(_col(r, "wall_time_build_s")), True),
-    ("step ms", lambda r: _ms(_col(r, "wall_time_step_s")), True),
-    ("steps", lambda r: _int(_col(r, "n_steps")), True),
+    ("build ms", lambda r: _ms(_col(r, "wall_time_build_s")) if _ran(r) else "", True),
+    ("step ms", lambda r: _ms(_col(r, "wall_time_step_s")) if _ran(r) else "", True),
+    ("steps", lambda r: _int(_col(r, "n_steps")) if _ran(r) else "", True),
 )
 
 

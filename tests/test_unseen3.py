@@ -122,6 +122,8 @@ def test_a_refused_row_names_its_limit_on_the_terminal_and_joins_its_series():
     assert "  - ss_glass_wc_fast / mujoco: unstable: dt = 1e-06 s is above the predicted explicit stability limit" \
         in table and "use dt <= 2e-07 s or dt = auto" in table
     assert "  - plate_al_near_edge / mujoco: skipped: mujoco: target kind 'plate' is not supported" in table
+    refused_line, _, skipped_line = table.splitlines()[1:4]
+    assert skipped_line.endswith("skipped") and refused_line.endswith("unstable")   # no 0.0 ms / 0 steps
     st = stability(pd.DataFrame(rows[:2]))
     assert len(st) == 1, st                            # one series, N = 41 (was two: "default" and 41)
     assert st["dt_stable_max"].iloc[0] == 2e-7 and st["dt_limit_observed"].iloc[0] == 1e-6
