@@ -34,6 +34,29 @@ def _label(r, several: bool) -> str:
     return f"{r['engine']} {r['contact']} dt={_dt(r['dt'])}" + (f" N={seg}" if seg not in ("", "nan") else "")
 
 
+def scenes_from_command(command: str) -> dict[str, Any]:
+    """Scene files (*.toml) named in a stored run's command line that load here, by scene name: a re-rendered
+    report of a run of scene files gets its references back (scene_figures checks each one's hash against the
+    rows', so an edited file is reported as changed, not used)."""
+    import shlex
+
+    import impactval
+
+    try:
+        tokens = shlex.split(command)
+    except ValueError:
+        return {}
+    out = {}
+    for tok in tokens:
+        if tok.endswith(".toml") and Path(tok).is_file():
+            try:
+                scene = impactval.load_scene(tok)
+            except ImpactvalError:
+                continue
+            out.setdefault(scene.name, scene)
+    return out
+
+
 def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True,
                   scenes: Mapping[str, Any] | None = None) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
     """Force-curve figures (caption, file name), the reference table (reports.provenance records)
@@ -50,8 +73,9 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
         try:
             scene = (scenes or {}).get(name) or impactval.load_scene(name)
         except ImpactvalError:
-            notes.append(f"{name}: not in the catalogue here (a scene file; the store keeps no scene definitions); "
-                         f"no reference curve or provenance")
+            notes.append(f"{name}: not in the catalogue here, and no scene file of that name on the run's command line "
+                         f"is found from here (the store keeps no scene definitions; re-render from the directory the "
+                         f"run started in); no reference curve or provenance")
             continue
         if str(g["scene_hash"].iloc[0]) != scene_hash(scene):
             notes.append(f"{name}: the scene or reference changed since this run (scene hash "
@@ -117,6 +141,8 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
     out.mkdir(parents=True, exist_ok=True)
     rows = store.rows(run_id=run_id) if rows is None else rows
     plots = plots and importlib.util.find_spec("matplotlib") is not None
+    if scenes is None:          # a re-render: the scene files named on the run's command line, where still found
+        scenes = scenes_from_command(str(store.run_info(run_id).get("command") or ""))
     figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots, scenes=scenes)
     if plots and history is not None and len(history) and history["run_index"].nunique() > 1:
         from impactval.history import row_key

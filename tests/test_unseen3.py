@@ -316,3 +316,22 @@ def test_two_different_scenes_with_one_name_are_refused_before_any_write(tmp_pat
 
     same = [_scene("rigid_pmma_glass_fast"), _scene("rigid_pmma_glass_fast")]
     assert len(unique_scenes(same)) == 1
+
+
+def test_rerendered_report_of_scene_files_finds_them_on_the_command_line(tmp_path, monkeypatch):
+    """`impactval report DIR` of a run of scene files had no reference values ("not in the catalogue"): it now
+    loads the *.toml files named on the stored command line (hash-checked against the rows)."""
+    pytest.importorskip("mujoco", reason="pip install 'impactval[mujoco]'")
+    from impactval.nightly import render_stored
+    from impactval.runner import run
+
+    monkeypatch.chdir(UNSEEN3.parent.parent)
+    path = str(Path("tests/unseen3/rigid_pmma_glass_fast.toml"))
+    run([path], ["mujoco"], out=tmp_path / "run", workers=1, progress=None,
+        command=f"impactval run {path} --engines mujoco --out {tmp_path / 'run'}")
+    render_stored(str(tmp_path / "run"), out=tmp_path / "again")
+    md = (tmp_path / "again" / "report.md").read_text()
+    assert "| rigid_pmma_glass_fast | 10.3836261 | 55.6559651 |" in md and "not in the catalogue" not in md
+    monkeypatch.chdir(tmp_path)                      # the relative path no longer resolves: an honest note
+    render_stored(str(tmp_path / "run"), out=tmp_path / "elsewhere")
+    assert "re-render from the directory the run started in" in (tmp_path / "elsewhere" / "report.md").read_text()
