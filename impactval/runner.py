@@ -23,7 +23,7 @@ import uuid
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import pandas as pd
 
@@ -173,6 +173,19 @@ class TheoryGap:
     timoshenko_frequencies: tuple[float, ...] = field(default=())
 
 
+def _structure_size(scene, rs: Mapping[str, Any], settings: EngineSettings, diag: Mapping[str, Any]) -> str:
+    """The run table's N: chain segments, fe-beam elements or the modes of a modal body, as the engine used them
+    (its result settings, then what was asked, then a refused row's plan); none for a target without a structure
+    to size (a rigid plate, a second ball: `--segments 35` showed N = 35 there) and, for a modal target, only the
+    modes an engine reports (the scene's own)."""
+    kind = getattr(scene.target, "kind", "")
+    if kind in ("rigid-plate", "ball"):
+        return ""
+    order = (rs.get("modes"),) if kind == "modal" else (rs.get("segments"), rs.get("modes"), settings.segments,
+                                                        settings.modes, diag.get("segments"))
+    return str(next((v for v in order if v not in (None, "", 0)), ""))
+
+
 def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
              lin: ImpactResult | None, job_key: str = "", theory: TheoryGap | None = None) -> dict[str, Any]:
     """One results row (see COLUMNS; errors are signed fractions (engine - reference) / reference).
@@ -195,8 +208,7 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         integrator=rs.get("integrator") or settings.integrator or diag.get("integrator") or "", dt=dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body; a row refused before
         # stepping has the planned size in its diagnostics (so it joins its series: sweep's stability table)
-        segments=str(next((v for v in (rs.get("segments"), rs.get("modes"), settings.segments, settings.modes,
-                                        diag.get("segments")) if v not in (None, "", 0)), "")),
+        segments=_structure_size(scene, rs, settings, diag),
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],

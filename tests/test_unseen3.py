@@ -335,3 +335,24 @@ def test_rerendered_report_of_scene_files_finds_them_on_the_command_line(tmp_pat
     monkeypatch.chdir(tmp_path)                      # the relative path no longer resolves: an honest note
     render_stored(str(tmp_path / "run"), out=tmp_path / "elsewhere")
     assert "re-render from the directory the run started in" in (tmp_path / "elsewhere" / "report.md").read_text()
+
+
+def test_no_segment_count_on_targets_without_a_structure():
+    """`run --segments 35` on the rigid PMMA plate, the two balls and the modal target printed N = 35 for every
+    engine (nothing there has segments); a sweep's segments axis on a ball or modal scene made duplicate cells."""
+    pytest.importorskip("mujoco", reason="pip install 'impactval[mujoco]'")
+    from impactval.runner import make_row
+    from impactval.sweep import build_jobs
+
+    settings = EngineSettings(segments=35)
+    for name, n in (("rigid_pmma_glass_fast", ""), ("ball_ball_equal_ti", ""), ("modal_light_coupled", ""),
+                    ("ss_glass_wc_fast", "35")):
+        scene = _scene(name)
+        res = execute_job("mujoco", scene, settings)
+        assert res.status == "ok", res.message
+        row = make_row("run", scene, "mujoco", settings, res, impactval.solve(scene, tol=1e-6), None)
+        assert row["segments"] == n, (name, row["segments"])
+    scenes = [_scene("ball_ball_equal_ti"), _scene("modal_light_coupled"), _scene("ss_glass_wc_fast")]
+    jobs = build_jobs(scenes, ["mujoco"], EngineSettings(dt=1e-7), segments={"mujoco": [21, 41]})
+    assert [j.scene.name for j in jobs] == ["ball_ball_equal_ti", "modal_light_coupled", "ss_glass_wc_fast",
+                                            "ss_glass_wc_fast"]
