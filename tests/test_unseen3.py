@@ -356,3 +356,21 @@ def test_no_segment_count_on_targets_without_a_structure():
     jobs = build_jobs(scenes, ["mujoco"], EngineSettings(dt=1e-7), segments={"mujoco": [21, 41]})
     assert [j.scene.name for j in jobs] == ["ball_ball_equal_ti", "modal_light_coupled", "ss_glass_wc_fast",
                                             "ss_glass_wc_fast"]
+
+
+def test_a_job_that_newly_times_out_fails_the_night(tmp_path):
+    """A night with --timeout 1 s after a good night: the timed-out rows carry no integrator and no N, so they
+    matched no baseline row (`x`) and the night said "no regression", exit 0, with six newly failing jobs. They
+    are now matched on the fields they could report: `!`, exit 1, and no phantom "engine version -> ?"."""
+    pytest.importorskip("mujoco", reason="pip install 'impactval[mujoco]'")
+    from impactval.cli import main
+
+    runner = CliRunner()
+    args = ["nightly", _path("ss_glass_wc_fast"), _path("rigid_pmma_glass_fast"), "--engines", "mujoco",
+            "--out", str(tmp_path), "-j", "1"]
+    first = runner.invoke(main, args)
+    assert first.exit_code == 0, first.output
+    second = runner.invoke(main, [*args, "--timeout", "0.001"])
+    assert second.exit_code == 1, second.output
+    assert "! ss_glass_wc_fast / mujoco" in second.output and "ok -> timeout" in second.output
+    assert "x ss_glass_wc_fast" not in second.output and "-> ?" not in second.output
