@@ -177,16 +177,19 @@ UNREPORTED = ("integrator", "segments")
 
 
 def _unreported_match(row, base: dict) -> pd.Series | None:
-    """The one baseline row a failed row matches when only the fields it could not report (UNREPORTED, empty
-    in it) are left out: a job that newly times out or crashes is `!` newly failing, not `x` not comparable
-    (cc_short_heavy_ball at --timeout 1: six newly failing jobs passed a night with exit 0)."""
-    if _ok(row["status"]):
-        return None
+    """The one baseline row that matches when a row without a result (on either side) leaves the fields it
+    could not report (UNREPORTED) empty: a job that newly times out or crashes is `!` newly failing, one that
+    timed out before and runs now `*` fixed, not `x` not comparable (cc_short_heavy_ball at --timeout 1: six
+    newly failing jobs passed a night with exit 0)."""
     key = row_key(row)
-    free = [i for i, k in enumerate(KEY) if k in UNREPORTED and key[i] == ""]
-    if not free:
-        return None
-    found = [o for k, o in base.items() if all(a == b for i, (a, b) in enumerate(zip(key, k)) if i not in free)]
+    idx = [i for i, k in enumerate(KEY) if k in UNREPORTED]
+    found = []
+    for k, o in base.items():
+        if _ok(row["status"]) and _ok(o["status"]):
+            continue                    # two results know their integrator and N: the exact key decides
+        if all(a == b for i, (a, b) in enumerate(zip(key, k)) if i not in idx) and \
+                all(key[i] == k[i] or "" in (key[i], k[i]) for i in idx):
+            found.append(o)
     return found[0] if len(found) == 1 else None
 
 

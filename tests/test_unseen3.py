@@ -374,3 +374,13 @@ def test_a_job_that_newly_times_out_fails_the_night(tmp_path):
     assert second.exit_code == 1, second.output
     assert "! ss_glass_wc_fast / mujoco" in second.output and "ok -> timeout" in second.output
     assert "x ss_glass_wc_fast" not in second.output and "-> ?" not in second.output
+    third = runner.invoke(main, args)                       # runs again: against the timed-out night, fixed
+    assert third.exit_code == 0, third.output
+    from impactval import history
+    from impactval.store import Store
+
+    db = Store(tmp_path / "impactval.sqlite")
+    ids = [ln.split()[2] for ln in (second.output + third.output).splitlines() if ln.startswith("nightly run ")]
+    cmp = history.compare(db.rows(run_id=ids[1]), db.rows(run_id=ids[0]), 0.2)
+    assert set(cmp.loc[cmp["scene"] == "ss_glass_wc_fast", "mark"]) == {"*"}, cmp[["scene", "mark", "why"]]
+    db.close()
