@@ -9,7 +9,7 @@ to 5e-8 for C and Warp; the worked and two unseen beams (MuJoCo C's own chain, t
 identical model, Newton); the chain's tree root and size limits in float32; the first unstable dt on the
 plate (the energy measure). Several minutes; not a test.
 
-Run: python benchmarks/bench_warp_engines.py   (Newton's beams only: ... newton)
+Run: python benchmarks/bench_warp_engines.py   (Newton's beams only: ... newton; the Timoshenko scenes: ... timoshenko)
 """
 from __future__ import annotations
 
@@ -132,7 +132,49 @@ def onset(engine: str) -> None:
             return
     print(f"{engine:12s} plate onset: none up to {frac:.3f} dt_limit", flush=True)
 
+def timoshenko() -> None:
+    """MuJoCo Warp and Newton, every default, on the five Timoshenko scenes, injected Hertz (vs the Timoshenko Hertz
+    reference) and native (vs its linear theory): N, errors, the predicted model_error, energy, Warp vs MuJoCo C, and for
+    native the chain's own linear-theory prediction (solve_linear_modes on its modes) (docs/mujoco-warp.md and
+    docs/newton.md, "Timoshenko beams"; python benchmarks/bench_warp_engines.py timoshenko; the clamped-clamped linear
+    reference takes ~5 min)."""
+    from impactval.engines.base import execute_job
+    from impactval.engines.chain import hencky_chain
+    from impactval.reference.linear import solve_linear_modes
+
+    scenes = ["beam_ss_stubby_timoshenko", str(UNSEEN / "stubby_steel_timoshenko.toml"),
+              str(UNSEEN.parent / "unseen2" / "cantilever_al_tip_timoshenko.toml"),
+              str(UNSEEN.parent / "unseen2" / "cc_soft_polymer_timoshenko.toml"), str(UNSEEN / "heavy_wc_slender_timoshenko.toml")]
+    for name in scenes:
+        sc = impactval.load_scene(name)
+        hertz_ref = impactval.solve(sc, tol=1e-6)
+        linear_refs: dict = {}
+        for engine in ("mujoco-warp", "newton"):
+            for contact in ("hertz", "native"):
+                r = execute_job(engine, sc, EngineSettings(contact=contact))
+                label = f"{engine:12s} {Path(name).stem:30s} {contact:6s}"
+                if r.status != "ok":
+                    print(f"{label} {r.status}: {r.message}", flush=True)
+                    continue
+                d = r.diagnostics
+                if contact == "hertz":
+                    ref, pred = hertz_ref, [d[f"model_error_{m}"] for m in ("t_m", "f_m", "delta_m")]
+                else:
+                    k = d["contact_stiffness"]
+                    ref = linear_refs.setdefault(k, solve_linear(sc, stiffness=k))
+                    chain = hencky_chain(sc.target, d["segments"], shear=True)
+                    own = solve_linear_modes(chain.modes(), sc.ball.mass, k, sc.ball.velocity).metrics
+                    pred = [getattr(own, m) / getattr(ref, m) - 1 for m in ("t_m", "f_m", "delta_m")]
+                err = [getattr(r, m) / getattr(ref, m) - 1 for m in ("t_m", "f_m", "delta_m")]
+                vs = d.get("vs_mujoco_c", {})
+                vs_txt = " vs C %+.4f/%+.4f/%+.4f %%" % tuple(100 * vs[k] for k in ("t_m", "f_m", "delta_m")) if "t_m" in vs else ""
+                print(f"{label} N {d['segments']:3d} dt {r.dt:.2g}: {100 * err[0]:+.3f} / {100 * err[1]:+.3f} / "
+                      f"{100 * err[2]:+.3f} %, predicted {100 * pred[0]:+.3f} / {100 * pred[1]:+.3f} / {100 * pred[2]:+.3f} %, "
+                      f"energy {100 * r.energy_error:.3f} %{vs_txt}{' [' + '; '.join(r.validity) + ']' if r.validity else ''}",
+                      flush=True)
+
+
 if __name__ == "__main__":
     import sys
 
-    newton_beams() if sys.argv[1:] == ["newton"] else main()
+    {"newton": newton_beams, "timoshenko": timoshenko}.get(" ".join(sys.argv[1:]), main)()

@@ -206,6 +206,31 @@ def check_beam_model(adapter: EngineAdapter) -> None:
         assert abs(got / want - 1) <= r.model_error + 5e-3, (got, want, r.model_error)
 
 
+def check_timoshenko_beam(adapter: EngineAdapter, scene: str = "beam_ss_stubby_timoshenko", contact: str = "hertz",
+                          to_prediction: float = 1e-3) -> None:
+    """A Timoshenko beam (catalogue beam_ss_stubby_timoshenko, h/L = 0.1) with every default: status ok, the structure
+    model is shear-deformable (no "Euler-Bernoulli chain" validity note), each metric within 1.5 % of the Timoshenko
+    reference and, where the row carries the chain's predicted `model_error_<metric>`, within `to_prediction` of it.
+    Not in CHECKS (not every adapter builds a Timoshenko structure): chain adapters' tests call it."""
+    import impactval
+    from impactval.reference.linear import solve_linear
+
+    sc = impactval.load_scene(scene)
+    r = adapter.run(sc, EngineSettings(contact=contact))
+    _ok(r)
+    assert not any("Euler-Bernoulli" in v for v in r.validity), r.validity
+    if r.contact_law is not None and r.contact_law.kind == "linear":
+        ref = solve_linear(sc, stiffness=r.contact_law.coefficient)
+    else:
+        ref = impactval.solve(sc, tol=1e-6)
+    for m in ("t_m", "f_m", "delta_m"):
+        err = getattr(r, m) / getattr(ref, m) - 1.0
+        assert abs(err) <= 0.015, (m, err)
+        predicted = r.diagnostics.get(f"model_error_{m}")
+        if predicted is not None and contact == "hertz":
+            assert abs(err - predicted) <= to_prediction, (m, err, predicted)
+
+
 def check_ball_on_ball(adapter: EngineAdapter) -> None:
     """Two free spheres (catalogue ball_ball_steel_on_aluminium: different radii, materials and masses, the
     second at rest) with injected Hertz at every default: t_m, f_m, delta_m within PLATE_TOL of the closed form
@@ -340,4 +365,5 @@ def run_checks(adapter: EngineAdapter) -> dict[str, str]:
 
 
 
-__all__ = ["CHECKS", "run_checks", "CheckSkipped", "PLATE_TOL", "LIMIT_FRACTIONS", "check_plate_energy_near_the_limit"] + [c.__name__ for c in CHECKS]
+__all__ = ["CHECKS", "run_checks", "CheckSkipped", "PLATE_TOL", "LIMIT_FRACTIONS", "check_plate_energy_near_the_limit",
+           "check_timoshenko_beam"] + [c.__name__ for c in CHECKS]

@@ -169,7 +169,9 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     joint-space mass matrix gets ill-conditioned with its depth, see docs/mujoco-warp.md); the supports
     become constraints: a `<connect>` pin at each supported end, the roller at x = 0 a small body on a
     slide-x joint pinned to the world, a clamp's 2EI/l a fixed tendon over the joints whose sum is that
-    end segment's absolute rotation. The same beam model either way (node hinges EI/l, same masses)."""
+    end segment's absolute rotation. The same beam model either way (node hinges EI/l, same masses). A Timoshenko
+    chain (chain.shear; MuJoCo Warp builds it rooted in the middle) adds a transverse slide of kappa G A / l at every
+    node and, at each supported end, a small body on a slide of 2 kappa G A / l that carries the end's constraint."""
     n, l = chain.n, chain.segment_length
     w, h = beam.width, beam.height
     k_hinge, k_clamp = chain.hinge_stiffness, chain.clamp_stiffness
@@ -202,16 +204,33 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     # the roller at x = 0 (simply supported, clamped-clamped): a body on a slide-x joint at node 0, pinned
     # to the world below; its mass never moves (pinned), its rotary inertia is negligible
     roller = ""
+    tiny = 1e-6 * iyy
     if support in ("simply-supported", "clamped-clamped"):
-        tiny = 1e-6 * iyy
+        shear0 = (f'<joint name="s0" type="slide" axis="0 0 1" stiffness="{_fmt(chain.support_shear_stiffness)}"/>'
+                  if chain.shear else "")
         roller = (f'<body name="roller0" pos="{_vec(-l if r > 0 else 0.0, 0, 0)}"><joint name="roller_x" type="slide" '
-                  f'axis="1 0 0"/><inertial pos="0 0 0" mass="{_fmt(m_seg)}" diaginertia="{_vec(tiny, tiny, tiny)}"/>'
+                  f'axis="1 0 0"/>{shear0}<inertial pos="0 0 0" mass="{_fmt(m_seg)}" diaginertia="{_vec(tiny, tiny, tiny)}"/>'
                   f'</body>')
+    elif chain.shear:          # cantilever: the clamped end's shear slide, a small body the clamp pins
+        roller = (f'<body name="clamp0" pos="{_vec(-l if r > 0 else 0.0, 0, 0)}"><joint name="s0" type="slide" '
+                  f'axis="0 0 1" stiffness="{_fmt(chain.support_shear_stiffness)}"/><inertial pos="0 0 0" '
+                  f'mass="{_fmt(m_seg / 2)}" diaginertia="{_vec(tiny, tiny, tiny)}"/></body>')
+
+    def slide(j: int) -> str:
+        """Node j's shear slide (a Timoshenko chain), before its hinge."""
+        return (f'<joint name="s{j}" type="slide" axis="0 0 1" stiffness="{_fmt(chain.shear_stiffness)}"/>'
+                if chain.shear else "")
+
+    far_end = ""
+    if chain.shear and support in ("simply-supported", "clamped-clamped"):   # x = L: the end's slide, pinned below
+        far_end = (f'<body name="end" pos="{_vec(l, 0, 0)}"><joint name="s{n}" type="slide" axis="0 0 1" '
+                   f'stiffness="{_fmt(chain.support_shear_stiffness)}"/><inertial pos="0 0 0" '
+                   f'mass="{_fmt(m_seg / 2)}" diaginertia="{_vec(tiny, tiny, tiny)}"/></body>')
     # left branch: segments r-1 .. 0, each framed at its right end (node i+1), hinge h{i+1} there
     left = ""
     for i in range(r - 1, -1, -1):
         pos = _vec(0.0, 0.0, 0.0) if i == r - 1 else _vec(-l, 0.0, 0.0)
-        left += (f'<body name="seg{i}" pos="{pos}"><joint name="h{i + 1}" type="hinge" axis="0 1 0" '
+        left += (f'<body name="seg{i}" pos="{pos}">{slide(i + 1)}<joint name="h{i + 1}" type="hinge" axis="0 1 0" '
                  f'stiffness="{_fmt(k_hinge)}"/>' + segment(i, True))
         if i == 0:
             left += roller
@@ -219,22 +238,25 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     # right branch: segments r+1 .. n-1, each framed at its left end (node i), hinge h{i} there
     right = ""
     for i in range(r + 1, n):
-        right += (f'<body name="seg{i}" pos="{_vec(l, 0.0, 0.0)}"><joint name="h{i}" type="hinge" axis="0 1 0" '
-                  f'stiffness="{_fmt(k_hinge)}"/>' + segment(i, False))
+        right += (f'<body name="seg{i}" pos="{_vec(l, 0.0, 0.0)}">{slide(i)}<joint name="h{i}" type="hinge" axis="0 1 0" '
+                  f'stiffness="{_fmt(k_hinge)}"/>' + segment(i, False) + (far_end if i == n - 1 else ""))
     right += "</body>" * (n - 1 - r)
     c = _vec(l / 2, 0, 0)
     chain_xml = (f'<body name="seg{r}" pos="{_vec(r * l, 0, 0)}">'
                  f'<joint name="root_x" type="slide" axis="1 0 0" pos="{c}"/>'
                  f'<joint name="root_z" type="slide" axis="0 0 1" pos="{c}"/>'
                  f'<joint name="root_r" type="hinge" axis="0 1 0" pos="{c}"/>'
-                 + segment(r, False) + (roller if r == 0 else "") + left + right + "</body>")
+                 + segment(r, False) + (roller if r == 0 else "") + (far_end if r == n - 1 else "") + left + right
+                 + "</body>")
     eq, tendons = [], []
     if support in ("simply-supported", "clamped-clamped"):
         eq.append('<connect name="roller" body1="roller0" anchor="0 0 0"/>')
     if support == "cantilever":
-        eq.append(f'<connect name="clamp" body1="seg0" anchor="{_vec(-l if r > 0 else 0.0, 0, 0)}"/>')
+        eq.append('<connect name="clamp" body1="clamp0" anchor="0 0 0"/>' if chain.shear else
+                  f'<connect name="clamp" body1="seg0" anchor="{_vec(-l if r > 0 else 0.0, 0, 0)}"/>')
     if support in ("simply-supported", "clamped-clamped"):
-        eq.append(f'<connect name="pin" body1="seg{n - 1}" anchor="{_vec(l, 0, 0)}"/>')
+        eq.append('<connect name="pin" body1="end" anchor="0 0 0"/>' if chain.shear else
+                  f'<connect name="pin" body1="seg{n - 1}" anchor="{_vec(l, 0, 0)}"/>')
     if support in ("clamped-clamped", "cantilever"):      # segment 0's absolute rotation: root_r + left hinges
         joints = '<joint joint="root_r" coef="1"/>' + "".join(f'<joint joint="h{j}" coef="1"/>' for j in range(1, r + 1))
         tendons.append(f'<fixed name="clamp_start" stiffness="{_fmt(k_clamp)}" springlength="0">{joints}</fixed>')

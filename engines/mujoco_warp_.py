@@ -15,7 +15,10 @@ Contact modes:
 Model differences forced by float32 (measured, docs/mujoco-warp.md): the chain's tree is rooted at its
 middle segment (option chain_root; supports become constraints, the same beam), it uses the section rotary
 inertia by default, and its N (the MuJoCo C chain's) is capped at MAX_SEGMENTS; `diagexact` is off (unsupported),
-the contact's direct solref rescaled to keep k0; connect anchors re-rounded to float32 kinematics.
+the contact's direct solref rescaled to keep k0; connect anchors re-rounded to float32 kinematics. On a Timoshenko
+beam the chain is the Timoshenko chain (engines.chain.hencky_chain(shear=True): a transverse slide of kappa G A / l at
+every node, 2 kappa G A / l at a supported end; MuJoCo C's model, built by the same `build_xml`, here rooted in the
+middle), at MuJoCo C's Timoshenko sizing, capped the same way.
 The C comparison uses the same model. Modal targets are not offered.
 
 Sampling: after each step a kernel stores the sample at the step's start (kinematics, constraint
@@ -123,7 +126,7 @@ class MujocoWarpAdapter(EngineAdapter):
 
     def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
         """The chain's natural frequencies [rad/s] from MuJoCo C's linearisation of the identical model."""
-        return MujocoAdapter().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
+        return _SameModelInC().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
 
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
         from impactval.engines._warp import CapturedStep, import_warp, window_end
@@ -233,7 +236,8 @@ class MujocoWarpAdapter(EngineAdapter):
                 if c_n > lay.n_segments:
                     from impactval.engines.chain import hencky_chain, model_error
 
-                    me = model_error(scene, hencky_chain(scene.target, lay.n_segments, settings.options.rotary_inertia))
+                    me = model_error(scene, hencky_chain(scene.target, lay.n_segments, settings.options.rotary_inertia,
+                                                         shear=timoshenko(scene)))
                     notes.append(f"chain capped at {lay.n_segments} segments for float32 (MAX_SEGMENTS, COND_LIMIT; "
                                  f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}; "
                                  f"predicted model error t_m {100 * me.t_m:+.2g} / f_m {100 * me.f_m:+.2g} % (the capped "
@@ -296,7 +300,16 @@ class MujocoWarpAdapter(EngineAdapter):
 class _SameModelInC(MujocoAdapter):
     """MuJoCo C on the model MuJoCo Warp runs: the MuJoCo adapter's model without `diagexact`
     (unsupported by mujoco_warp), the contact pair's direct solref rescaled to keep the stiffness k:
-    solref = (-k*A, 0) with A = efc_diagA without diagexact (body_invweight0 sums), the diagonal both engines then use."""
+    solref = (-k*A, 0) with A = efc_diagA without diagexact (body_invweight0 sums), the diagonal both engines then use;
+    on a Timoshenko beam the Timoshenko chain in any tree root (MuJoCo C's own adapter builds it serially only)."""
+
+    def chain(self, scene, settings: EngineSettings):
+        chain = super().chain(scene, settings)
+        if chain is None or chain.shear or not timoshenko(scene):
+            return chain
+        from impactval.engines.chain import hencky_chain
+
+        return hencky_chain(scene.target, chain.n, chain.rotary, shear=True)
 
     def build(self, scene, settings: EngineSettings):
         import mujoco
@@ -360,6 +373,7 @@ def sized_segments(scene, chain_tol: float, rotary: str, root: str = "middle") -
 
     from impactval.engines.chain import hencky_chain, model_error
 
+    shear = timoshenko(scene)      # C's default_segments sizes its (serial) Timoshenko chain there: the same chain model
     c_n = n = default_segments(scene, EngineSettings(options=(("chain_tol", chain_tol), ("rotary_inertia", "none"))))
     cap = MAX_SEGMENTS[rotary]
     while n > MIN_SEGMENTS:
@@ -370,7 +384,7 @@ def sized_segments(scene, chain_tol: float, rotary: str, root: str = "middle") -
         cap = max(MIN_SEGMENTS, int(0.9 * n))
     if n < c_n:     # capped: as the shared sizing at its cap, the N near the cap with the smallest model error
         n = min(range(max(MIN_SEGMENTS, n - 12), n + 1),
-                key=lambda m: (model_error(scene, hencky_chain(scene.target, m, rotary)).largest, -m))
+                key=lambda m: (model_error(scene, hencky_chain(scene.target, m, rotary, shear=shear)).largest, -m))
     return n
 
 
@@ -384,7 +398,7 @@ def mass_condition(scene, n: int, rotary: str, root: str) -> float:
     from impactval.engines.mujoco_ import build_xml
 
     xml, _ = build_xml(scene, EngineSettings(dt=1e-6, options=(("chain_root", root),)),
-                       hencky_chain(scene.target, n, rotary))
+                       hencky_chain(scene.target, n, rotary, shear=timoshenko(scene)))
     m = mujoco.MjModel.from_xml_string(xml)
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
@@ -392,6 +406,13 @@ def mass_condition(scene, n: int, rotary: str, root: str) -> float:
     mujoco.mj_fullM(m, d, mass)
     scale = 1.0 / np.sqrt(np.diag(mass))
     return float(np.linalg.cond(mass * scale[:, None] * scale[None, :]))
+
+
+def timoshenko(scene) -> bool:
+    """True on a Timoshenko beam: MuJoCo Warp builds the Timoshenko chain there (engines.chain.hencky_chain(shear=True):
+    a transverse slide of kappa G A / l at every node, 2 kappa G A / l at a supported end, the section's rotary
+    inertia; MuJoCo C's model, built by the same `build_xml`) in whichever tree root (chain_root) is asked."""
+    return getattr(scene.target, "theory", "euler-bernoulli") == "timoshenko"
 
 
 def _check_target(scene) -> None:

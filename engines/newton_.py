@@ -19,6 +19,10 @@ Model (SI, z up, no gravity, no friction, no damping: `angular_damping = 0`, con
   supported = revolute joints to the world at x = 0 and x = L (the second closes a loop, held by
   SemiImplicit's penalty joints, so the ends are pinned axially too); clamped ends add 2EI/l;
   cantilever = free end. Out-of-plane inertias are the box's (never excited: the problem is planar).
+  A Timoshenko beam (semi-implicit, featherstone) builds the Timoshenko chain (hencky_chain(shear=True), the chain of
+  MuJoCo C and PyBullet): every joint a D6 joint, a transverse slide of kappa G A / l (2 kappa G A / l at a supported
+  end) and the hinge, the section's rotary inertia, sized against Timoshenko theory; SemiImplicit's attach_ke then
+  holds only x, so the penalty give vanishes (the linear model decouples x) and N is the shared sizing's.
   Modal targets are not built.
 
 Contact "native": Newton's penalty contact, normal force ke*d with ke = the scene's k0 on both shapes
@@ -139,14 +143,16 @@ class NewtonAdapter(EngineAdapter):
         if scene.target.kind != "beam":
             return None
         rotary = settings.option("rotary_inertia", "none")
+        shear = timoshenko_chain(scene, settings)
         n = settings.segments
         if n is None:
             tol = float(settings.option("chain_tol", DEFAULT_CHAIN_TOL))
             if (settings.integrator or INTEGRATORS[0]) == "semi-implicit":
-                n = penalty_segments(scene, tol, rotary, self.attach_ke(scene, settings))
+                n = penalty_segments(scene, tol, rotary, self.attach_ke(scene, settings), shear)
             else:
-                n = segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS)).n
-        return hencky_chain(scene.target, n, rotary)
+                n = segments_for(scene, tol, rotary, MAX_SEGMENTS, centring(scene.target.impact_at, MAX_SEGMENTS),
+                                 shear=shear).n
+        return hencky_chain(scene.target, n, rotary, shear=shear)
 
     max_retries = ATTACH_KE_RETRIES
     #: the ball's body point at its lowest point (True, default) or at its centre (False, the model before; a test knob)
@@ -207,7 +213,10 @@ class NewtonAdapter(EngineAdapter):
                 ke = self.attach_ke(scene, settings)
                 give = penalty_give(scene, chain, ke)
                 beam = scene.target
-                shear = beam.shear_coefficient * beam.shear_modulus * beam.area * chain.n / (ke * beam.length)
+                # the joints' z give as a shear compliance (kappa G A / (attach_ke l)); 0 on the Timoshenko chain,
+                # whose joints' z is the shear slide itself (no attach_ke in z)
+                shear = 0.0 if chain.shear else (beam.shear_coefficient * beam.shear_modulus * beam.area * chain.n
+                                                 / (ke * beam.length))
                 # the chain SemiImplicit integrates = the rigid-jointed chain + the joints' give (exact linear
                 # theory on both chains); model_error is that chain's error against the scene's theory
                 total = tuple((1.0 + a) * (1.0 + g) - 1.0 for a, g in zip((me.t_m, me.f_m, me.delta_m), give))
@@ -219,11 +228,14 @@ class NewtonAdapter(EngineAdapter):
                 law_k = law.stiffness(_plate_delta_m(scene))
                 om_pen = penalty_chain_omega_max(chain, ke, scene.ball.mass, law_k)
                 if om_pen > om:
-                    om, what = om_pen, (f"SemiImplicit penalty-joint chain N = {chain.n} (attach_ke in x and z at "
-                                        f"each joint) + ball + contact spring {law_k:.3g} N/m")
+                    joints = ("attach_ke in x, the shear slide in z" if chain.shear else "attach_ke in x and z")
+                    om, what = om_pen, (f"SemiImplicit penalty-joint chain N = {chain.n} ({joints} at each joint) + "
+                                        f"ball + contact spring {law_k:.3g} N/m")
         validity = ()
         if chain is not None and err > MODEL_ERROR_BAR:
             validity = (self._model_error_note(scene, settings, chain, err, diag),)
+        if chain is not None and chain.shear:
+            diag["timoshenko_chain"] = True
         if integ == "xpbd":
             return Plan(math.inf, "XPBD (positional, no explicit limit)", err, diag, validity)
         return Plan(2.0 / om, f"{integ}, {what}", err, diag, validity)
@@ -234,11 +246,11 @@ class NewtonAdapter(EngineAdapter):
         theory = getattr(scene.target, "theory", "euler-bernoulli")
         rigid_f = diag.get("model_error_rigid_f_m", diag["model_error_f_m"])
         parts = [f"rigid chain N = {chain.n} ({chain.rotary} rotary inertia) {100 * rigid_f:+.2g} % in f_m"]
-        if "penalty_give_f_m" in diag:
+        if "penalty_give_f_m" in diag and not chain.shear:      # the Timoshenko chain's joints give nothing in z
             parts.append(f"the penalty joints' give at attach_ke {diag['attach_ke']:.3g} N/m {100 * diag['penalty_give_f_m']:+.2g} %")
-        if theory != "euler-bernoulli":
-            fix = (f"the chain is Euler-Bernoulli and the scene's theory {theory}: no Newton option removes that part; "
-                   f"use exudyn's beam models")
+        if theory != "euler-bernoulli" and not chain.shear:
+            fix = (f"the chain is Euler-Bernoulli and the scene's theory {theory} (the Timoshenko chain is built for "
+                   f"semi-implicit and featherstone); use --integrator semi-implicit or exudyn's beam models")
         elif chain.n >= (MAX_SEGMENTS_SEMI_IMPLICIT if (settings.integrator or INTEGRATORS[0]) == "semi-implicit"
                          else MAX_SEGMENTS):
             fix = "N is at the adapter's cap: --segments (slower, smaller dt) trades time for accuracy"
@@ -317,25 +329,51 @@ class NewtonAdapter(EngineAdapter):
                 lay.update(hit_body=body, hit_local=(off, 0.0, h / 2), top=h / 2)
         joints = []
         k_root = 0.0 if beam.support == "simply-supported" else chain.clamp_stiffness
-        joints.append(b.add_joint_revolute(-1, links[0], parent_xform=wp.transform((x0, 0.0, 0.0), wp.quat_identity()),
-                                           axis=y_axis, stiffness=k_root, damping=0.0,
-                                           target_ke=0.0, target_kd=0.0, label="h0"))
-        for i in range(1, n):
-            joints.append(b.add_joint_revolute(
-                links[i - 1], links[i], parent_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()),
-                axis=y_axis, stiffness=chain.hinge_stiffness, damping=0.0, target_ke=0.0, target_kd=0.0, label=f"h{i}"))
+        if chain.shear:
+            # the Timoshenko chain: every joint a D6 joint, a transverse slide (z in the parent's frame) of kappa G A / l
+            # (2 kappa G A / l at a supported end) and the hinge about y; SemiImplicit holds only x (and the out-of-plane
+            # directions) by attach_ke, so the slide's z is the shear spring itself
+            dof = newton.ModelBuilder.JointDofConfig
+
+            def hinge(parent, child, parent_xform, k_hinge, k_slide, label, child_xform=None):
+                return b.add_joint_d6(parent, child, parent_xform=parent_xform, child_xform=child_xform, label=label,
+                                      linear_axes=[dof(axis=(0.0, 0.0, 1.0), stiffness=k_slide, damping=0.0,
+                                                       target_ke=0.0, target_kd=0.0)],
+                                      angular_axes=[dof(axis=y_axis, stiffness=k_hinge, damping=0.0, target_ke=0.0,
+                                                        target_kd=0.0)])
+
+            joints.append(hinge(-1, links[0], wp.transform((x0, 0.0, 0.0), wp.quat_identity()), k_root,
+                                chain.support_shear_stiffness, "h0"))
+            for i in range(1, n):
+                joints.append(hinge(links[i - 1], links[i], wp.transform((l, 0.0, 0.0), wp.quat_identity()),
+                                    chain.hinge_stiffness, chain.shear_stiffness, f"h{i}"))
+        else:
+            joints.append(b.add_joint_revolute(-1, links[0], parent_xform=wp.transform((x0, 0.0, 0.0), wp.quat_identity()),
+                                               axis=y_axis, stiffness=k_root, damping=0.0,
+                                               target_ke=0.0, target_kd=0.0, label="h0"))
+            for i in range(1, n):
+                joints.append(b.add_joint_revolute(
+                    links[i - 1], links[i], parent_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()),
+                    axis=y_axis, stiffness=chain.hinge_stiffness, damping=0.0, target_ke=0.0, target_kd=0.0, label=f"h{i}"))
         b.add_articulation(joints, label="beam")
         if beam.support in ("simply-supported", "clamped-clamped"):
             k_end = 0.0 if beam.support == "simply-supported" else chain.clamp_stiffness
-            b.add_joint_revolute(-1, links[-1], parent_xform=wp.transform((x0 + length, 0.0, 0.0), wp.quat_identity()),
-                                 child_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()),
-                                 axis=y_axis, stiffness=k_end, damping=0.0, target_ke=0.0, target_kd=0.0,
-                                 label="pin")
+            if chain.shear:
+                hinge(-1, links[-1], wp.transform((x0 + length, 0.0, 0.0), wp.quat_identity()), k_end,
+                      chain.support_shear_stiffness, "pin", child_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()))
+            else:
+                b.add_joint_revolute(-1, links[-1], parent_xform=wp.transform((x0 + length, 0.0, 0.0), wp.quat_identity()),
+                                     child_xform=wp.transform((l, 0.0, 0.0), wp.quat_identity()),
+                                     axis=y_axis, stiffness=k_end, damping=0.0, target_ke=0.0, target_kd=0.0,
+                                     label="pin")
         lay.update(segments=n, segment_length=l, length=length, x0=x0,
                    pinned_end=beam.support in ("simply-supported", "clamped-clamped"))
         lay["hinge_stiffness"] = [k_root] + [chain.hinge_stiffness] * (n - 1)
         if beam.support in ("simply-supported", "clamped-clamped"):
             lay["hinge_stiffness"].append(k_end)      # the end pin: the last segment's absolute angle
+        if chain.shear:                               # the joints' slides, in the order of _joint_gap_vectors
+            lay["shear_stiffness"] = ([chain.support_shear_stiffness] + [chain.shear_stiffness] * (n - 1)
+                                      + [chain.support_shear_stiffness] * int(lay["pinned_end"]))
 
     # ------------------------------------------------------------------ stepping
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
@@ -498,11 +536,73 @@ class NewtonAdapter(EngineAdapter):
             pe += 0.5 * rel**2 @ k[:n]
             if len(k) > n:
                 pe += 0.5 * k[n] * theta[:, -1] ** 2
-            if lay.get("attach_ke"):
+            if lay.get("shear_stiffness"):            # the Timoshenko chain's D6 joints
+                joints, joints_axial = _shear_joint_energy(chain, lay, lay.get("attach_ke", 0.0))
+                pe += joints
+                axial += joints_axial
+            elif lay.get("attach_ke"):
                 gaps = 0.5 * lay["attach_ke"] * _joint_gaps_squared(chain, lay)
                 pe += gaps.sum(axis=1)
                 axial += gaps[:, 0]
         return pe + ke - axial, axial
+
+
+def linearised_chain(adapter, scene, settings: EngineSettings, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(mass diagonal, stiffness) of the built chain in each segment's z and rotation about y (order z_0, theta_0,
+    z_1, ...), from Newton itself: the model's body masses and inertias, and the stiffness column by column by
+    central differences of the forces SemiImplicit's joint kernel applies (one step of dt from rest, with the
+    segment moved by +-eps [m] in z or turned by +-eps [rad] about its centre of mass: force = m dv / dt). An
+    independent check of the chain model (`penalty_chain_matrices`' z-theta block; chain.linear() on the Timoshenko
+    chain), float32 to ~1e-6."""
+    from impactval.engines._warp import import_warp
+
+    wp = import_warp()
+    import newton
+
+    from dataclasses import replace
+
+    settings = replace(settings, integrator="semi-implicit", contact="hertz")
+    model, lay = adapter.build(scene, settings, wp, newton)
+    solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0, joint_attach_ke=adapter.attach_ke(scene, settings),
+                                               joint_attach_kd=0.0)
+    state, out = model.state(), model.state()
+    newton.eval_fk(model, state.joint_q, state.joint_qd, state)
+    q0 = state.body_q.numpy().astype(np.float64)
+    n, l = lay["segments"], lay["segment_length"]
+    mass = model.body_mass.numpy().astype(float)[:n]
+    inertia = model.body_inertia.numpy().astype(float)[:n, 1, 1]
+    dt = 1e-6
+    control = model.control()
+
+    def forces(q: np.ndarray) -> np.ndarray:
+        state.body_q.assign(q.astype(np.float32))
+        state.body_qd.zero_()
+        state.clear_forces()
+        solver.step(state, out, control, None, dt)
+        qd = out.body_qd.numpy().astype(float)[:n]
+        f = np.empty(2 * n)
+        f[0::2] = mass * qd[:, 2] / dt           # linear z (spatial top), angular y (spatial bottom)
+        f[1::2] = inertia * qd[:, 4] / dt
+        return f
+
+    def moved(i: int, kind: int, h: float) -> np.ndarray:
+        q = q0.copy()
+        if kind == 0:
+            q[i, 2] += h
+        else:                                     # turn about y through the centre of mass (l/2 along the body's x)
+            c, s_ = math.cos(h / 2), math.sin(h / 2)
+            q[i, 3:7] = (0.0, s_, 0.0, c)         # the straight chain: identity rotation before
+            q[i, 0] += l / 2 - (l / 2) * math.cos(h)
+            q[i, 2] += (l / 2) * math.sin(h)      # the origin (left end) moves so the centre stays put
+        return q
+
+    k = np.zeros((2 * n, 2 * n))
+    for i in range(n):
+        for kind in (0, 1):
+            k[:, 2 * i + kind] = -(forces(moved(i, kind, eps)) - forces(moved(i, kind, -eps))) / (2 * eps)
+    diag = np.empty(2 * n)
+    diag[0::2], diag[1::2] = mass, inertia
+    return diag, 0.5 * (k + k.T)
 
 
 def _energy_failure(result) -> bool:
@@ -518,6 +618,15 @@ def _plate_delta_m(scene) -> float:
     return plate_impact(scene.ball.mass, scene.alpha, scene.ball.velocity).delta_m
 
 
+def timoshenko_chain(scene, settings: EngineSettings) -> bool:
+    """True when the job builds the Timoshenko chain (a Timoshenko beam, integrator semi-implicit or featherstone):
+    each joint a D6 joint with a transverse slide of kappa G A / l (2 kappa G A / l at a supported end) and the hinge,
+    the section's rotary inertia (engines.chain.hencky_chain(shear=True), MuJoCo C's and PyBullet's chain). XPBD keeps
+    the Euler-Bernoulli chain (its positional joints ignore the passive stiffness; the row's note says so)."""
+    return (getattr(scene.target, "theory", "euler-bernoulli") == "timoshenko"
+            and (settings.integrator or INTEGRATORS[0]) in ("semi-implicit", "featherstone"))
+
+
 def attach_ke_for(scene) -> float:
     """SemiImplicit joint_attach_ke [N/m] for `scene`: ATTACH_KE_AUTO on a beam, 1e9 for a rigid plate (no joints)."""
     return ATTACH_KE_AUTO if scene.target.kind == "beam" else ATTACH_KE
@@ -528,18 +637,18 @@ def penalty_give(scene, chain: HenckyChain, attach_ke: float) -> tuple[float, fl
     spring k0) on the linearised penalty-joint chain (`penalty_chain_matrices`) against the rigid-jointed chain.
     (Checked against Newton, worked beam, native: predicted f_m vs theory +0.50 % at N = 41, ke 1e9 and +1.49 %
     at 3e9, measured +0.53 / +1.53 %; +1.85 / +1.85 % at ke 1e10.)"""
-    return _give(scene, chain.n, chain.rotary, float(attach_ke))
+    return _give(scene, chain.n, chain.rotary, float(attach_ke), chain.shear)
 
 
 @lru_cache(maxsize=64)
-def _give(scene, n: int, rotary: str, attach_ke: float) -> tuple[float, float, float]:
+def _give(scene, n: int, rotary: str, attach_ke: float, shear: bool = False) -> tuple[float, float, float]:
     from scipy import linalg
 
     from impactval.reference.beams import Modes
     from impactval.reference.hertz import plate_impact
     from impactval.reference.linear import solve_linear_modes
 
-    chain = hencky_chain(scene.target, n, rotary)
+    chain = hencky_chain(scene.target, n, rotary, shear=shear)
     mass, k, row = penalty_chain_matrices(chain, attach_ke)
     w2, vecs = linalg.eigh(k, np.diag(mass))
     phi = row @ vecs
@@ -552,21 +661,23 @@ def _give(scene, n: int, rotary: str, attach_ke: float) -> tuple[float, float, f
     return a.t_m / b.t_m - 1.0, a.f_m / b.f_m - 1.0, a.delta_m / b.delta_m - 1.0
 
 
-def penalty_segments(scene, tol: float, rotary: str, attach_ke: float) -> int:
+def penalty_segments(scene, tol: float, rotary: str, attach_ke: float, shear: bool = False) -> int:
     """Segments for SemiImplicit: the shared sizing (`segments_for`, capped at MAX_SEGMENTS_SEMI_IMPLICIT), then
     fewer while the penalty joints' give at `attach_ke` exceeds GIVE_TOL (the give grows ~N^2 at a fixed ke:
-    each joint adds a shear-like compliance 1/ke, kGA_equivalent = ke l)."""
-    return _penalty_segments(scene, float(tol), rotary, float(attach_ke))
+    each joint adds a shear-like compliance 1/ke, kGA_equivalent = ke l). `shear`: the Timoshenko chain, sized
+    against Timoshenko theory; its joints' z is the shear slide (no attach_ke there), so its give is the axial
+    attachment's only, which the linear model decouples from the bending (0)."""
+    return _penalty_segments(scene, float(tol), rotary, float(attach_ke), bool(shear))
 
 
 @lru_cache(maxsize=32)
-def _penalty_segments(scene, tol: float, rotary: str, attach_ke: float) -> int:
+def _penalty_segments(scene, tol: float, rotary: str, attach_ke: float, shear: bool = False) -> int:
     cap = MAX_SEGMENTS_SEMI_IMPLICIT
     adjust = centring(scene.target.impact_at, cap)
-    n = segments_for(scene, tol, rotary, cap, adjust).n
+    n = segments_for(scene, tol, rotary, cap, adjust, shear=shear).n
 
     def within(m: int) -> bool:
-        return max(abs(x) for x in _give(scene, m, rotary, attach_ke)) <= GIVE_TOL
+        return max(abs(x) for x in _give(scene, m, rotary, attach_ke, shear)) <= GIVE_TOL
 
     if within(n):
         return n
@@ -587,7 +698,8 @@ def penalty_chain_matrices(chain: HenckyChain, attach_ke: float) -> tuple[np.nda
     """(mass diagonal, stiffness, contact row) of the chain SemiImplicit integrates, linearised in the plane:
     per segment x, z of its centre of mass and rotation theta (mass m, m, rotary inertia J); every joint's
     anchors held together by attach_ke in x and z (a world joint: the anchor to its world point), the hinge
-    springs on the relative rotations; the row gives the contact point's z."""
+    springs on the relative rotations; the row gives the contact point's z. The Timoshenko chain (chain.shear):
+    each joint's z is its D6 joint's slide, kappa G A / l (a world joint 2 kappa G A / l), not attach_ke."""
     n, l = chain.n, chain.segment_length
     nd = 3 * n
     mass = np.zeros(nd)
@@ -609,7 +721,7 @@ def penalty_chain_matrices(chain: HenckyChain, attach_ke: float) -> tuple[np.nda
     for i in range(n - 1):                             # joint i+1: right end of i to left end of i+1
         (ax, az), (bx, bz) = anchor_rows(i, 1), anchor_rows(i + 1, -1)
         spring(bx - ax, attach_ke)
-        spring(bz - az, attach_ke)
+        spring(bz - az, chain.shear_stiffness if chain.shear else attach_ke)
         rot = np.zeros(nd)
         rot[3 * (i + 1) + 2], rot[3 * i + 2] = 1.0, -1.0
         spring(rot, chain.hinge_stiffness)
@@ -619,7 +731,7 @@ def penalty_chain_matrices(chain: HenckyChain, attach_ke: float) -> tuple[np.nda
     for i, end, k_rot in ends:                         # world joints
         ax, az = anchor_rows(i, end)
         spring(ax, attach_ke)
-        spring(az, attach_ke)
+        spring(az, chain.support_shear_stiffness if chain.shear else attach_ke)
         rot = np.zeros(nd)
         rot[3 * i + 2] = 1.0
         spring(rot, k_rot)
@@ -662,6 +774,37 @@ def _joint_gaps_squared(chain: np.ndarray, lay: dict) -> np.ndarray:
     if lay["pinned_end"]:
         gaps += (tail[:, -1] - np.array([x0 + lay["length"], 0.0, 0.0])) ** 2
     return gaps
+
+
+def _joint_gap_vectors(chain: np.ndarray, lay: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(gaps, slide axes), each (samples, joints, 3): child anchor - parent anchor [m] of every joint of the chain
+    (h0, h1 .. h(n-1), then the end pin when there is one) and the joint's slide axis, the parent's z in the world
+    (a world joint: the world's z)."""
+    ns, n = chain.shape[:2]
+    l = lay["segment_length"]
+    pos, quat = chain[..., :3], chain[..., 3:]
+    tail = pos + _rotate(quat.reshape(-1, 4), np.array([l, 0.0, 0.0])).reshape(ns, n, 3)   # x = l end
+    z = _rotate(quat.reshape(-1, 4), np.array([0.0, 0.0, 1.0])).reshape(ns, n, 3)
+    x0 = lay["x0"]
+    world_z = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (ns, 1, 3))
+    gaps = [pos[:, :1] - np.array([x0, 0.0, 0.0]), pos[:, 1:] - tail[:, :-1]]
+    axes = [world_z, z[:, :-1]]
+    if lay["pinned_end"]:
+        gaps.append(tail[:, -1:] - np.array([x0 + lay["length"], 0.0, 0.0]))
+        axes.append(world_z)
+    return np.concatenate(gaps, axis=1), np.concatenate(axes, axis=1)
+
+
+def _shear_joint_energy(chain: np.ndarray, lay: dict, attach_ke: float) -> tuple[np.ndarray, np.ndarray]:
+    """(energy, axial) [J] per sample of the Timoshenko chain's D6 joints: each slide's spring k_s/2 q^2 (q = the gap
+    along the slide axis) plus SemiImplicit's attachment attach_ke/2 |gap - q axis|^2 (0 for Featherstone's exact
+    joints); `axial` = the attachment's x part (the float32 axial noise, as `_joint_gaps_squared`'s x)."""
+    gaps, axes = _joint_gap_vectors(chain, lay)
+    q = np.einsum("sji,sji->sj", gaps, axes)
+    rest = gaps - q[..., None] * axes
+    slide = 0.5 * (q**2) @ np.asarray(lay["shear_stiffness"], float)
+    attach = 0.5 * attach_ke * np.sum(rest**2, axis=(1, 2))
+    return slide + attach, 0.5 * attach_ke * np.sum(rest[..., 0] ** 2, axis=1)
 
 
 def _rotate(quat: np.ndarray, v: np.ndarray) -> np.ndarray:
