@@ -182,11 +182,12 @@ def _unreported_match(row, base: dict) -> pd.Series | None:
     timed out before and runs now `*` fixed, not `x` not comparable (cc_short_heavy_ball at --timeout 1: six
     newly failing jobs passed a night with exit 0)."""
     key = row_key(row)
-    idx = [i for i, k in enumerate(KEY) if k in UNREPORTED]
     found = []
     for k, o in base.items():
-        if _ok(row["status"]) and _ok(o["status"]):
-            continue                    # two results know their integrator and N: the exact key decides
+        # two results know their integrator; an empty N on a result is a target without a structure to size (a
+        # rigid plate, a second ball), where older rows showed the asked --segments
+        free = UNREPORTED if not (_ok(row["status"]) and _ok(o["status"])) else ("segments",)
+        idx = [i for i, name in enumerate(KEY) if name in free]
         if all(a == b for i, (a, b) in enumerate(zip(key, k)) if i not in idx) and \
                 all(key[i] == k[i] or "" in (key[i], k[i]) for i in idx):
             found.append(o)
