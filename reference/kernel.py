@@ -744,13 +744,177 @@ def solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, window, max_nodes):
             e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
 
 
+
+#: delta_max is refined on sub-steps of 1/2^DENSE_LEVELS of the node steps around the peak (see `dense_peak`)
+DENSE_LEVELS = 3
+
+
+@njit(cache=True)
+def _shift(c: np.ndarray, q: float, inv_q: float, out: np.ndarray) -> None:
+    """out: monomial coefficients in s of c((s + q) inv_q), i.e. the step's force polynomial (in sigma on [0, 1])
+    on the sub-step [q inv_q, (q + 1) inv_q] with its own variable s on [0, 1]."""
+    m = c.shape[0]
+    sc = 1.0
+    for l in range(m):
+        out[l] = c[l] * sc
+        sc *= inv_q
+    for k in range(m - 1):            # Taylor shift by q (repeated synthetic division)
+        for l in range(m - 2, k - 1, -1):
+            out[l] += q * out[l + 1]
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
+def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
+    """delta_max of the first contact from the scheme's own solution between its nodes [m].
+
+    The peak of delta was the maximum of the degree-6 interpolant of the node values. delta carries the ringing
+    of every mode the contact excites (amplitude ~ s w^-3.5 for a mode, from the t^1.5 onset), which nodes a
+    step omega H ~ 2-4 apart cannot interpolate: that was the largest part of the unresolved modes' error in
+    delta_m (single modes: ~s w^-3.5, the old table's size). Here the modes are swept again with the run's own
+    force polynomials (node 0 to the peak region: exact for them, as in the run), and on the steps around the
+    largest node each step is split into 2^DENSE_LEVELS sub-steps (table level + DENSE_LEVELS, the polynomial
+    re-expanded on each sub-step), on which delta = x_ball - sum Im y (less the residual spring's R f) is exact
+    for the same force; the degree-6 interpolant of the sub-step values around the largest gives the peak.
+    t, d, f, x, u: the run's nodes (time [s], delta [m], force [N], ball displacement [m] and velocity [m/s]) up
+    to `end` (the node ending the first contact); tables at level j + j0 for step H / 2^j and energy weights ew, as in
+    `run` (the sweep is `run`'s own)."""
+    n = Er.shape[1]
+    nlev = Er.shape[0]
+    pk = 0
+    for k in range(end):
+        if d[k] > d[pk]:
+            pk = k
+    k_lo = max(pk - 1, 0)            # the steps on either side of the largest node are refined
+    k_hi = min(pk + 1, end)
+    yr = np.zeros(n)
+    yi = np.zeros(n)
+    sig = np.empty(p + 1)
+    L = np.empty((p + 1, p + 1))
+    Pw = np.empty(p + 2)
+    coef = np.zeros(p + 1)
+    sub = np.zeros(p + 1)
+    Q = 2 ** DENSE_LEVELS
+    ts = np.empty((k_hi - k_lo) * Q + 1)
+    ds = np.empty((k_hi - k_lo) * Q + 1)
+    ts[0] = t[k_lo]
+    ds[0] = d[k_lo]
+    ns = 1
+    x1 = x[k_lo]
+    u1 = u[k_lo]
+    for k in range(1, k_hi + 1):
+        eta = t[k] - t[k - 1]
+        first = max(k - p, 0)
+        m = k - first
+        for q in range(m + 1):
+            sig[q] = (t[first + q] - t[k - 1]) / eta
+        _lagrange_coeffs(sig, m, L, Pw)
+        for l in range(p + 1):
+            acc = 0.0
+            if l <= m:
+                for q in range(m + 1):
+                    acc += L[q, l] * f[first + q]
+            coef[l] = acc
+        jt = j0 + int(np.round(np.log2(H / eta)))
+        if k <= k_lo:
+            if p == 5:
+                _sweep6_free(Er, Ei, Kr, Ki, jt, coef, yr, yi)
+            else:
+                _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, p)
+            continue
+        js = min(jt + DENSE_LEVELS, nlev - 1)
+        nq = 2 ** (js - jt)
+        es = eta / nq
+        for q in range(nq):
+            _shift(coef, float(q), 1.0 / nq, sub)
+            if p == 5:
+                _sweep6_free(Er, Ei, Kr, Ki, js, sub, yr, yi)
+            else:
+                _sweep(Er, Ei, Kr, Ki, js, sub, yr, yi, ew, p)
+            x2 = 0.0
+            for i in range(n):
+                x2 += yi[i]
+            wu = 0.0
+            wx = 0.0
+            fs = 0.0
+            for l in range(p + 1):
+                wu += sub[l] / (l + 1)
+                wx += sub[l] / ((l + 1) * (l + 2))
+                fs += sub[l]
+            x1 = x1 + u1 * es - es * es * wx / m0
+            u1 = u1 - es * wu / m0
+            gap = x1 - x2
+            dv = gap
+            if R > 0.0 and gap > 0.0:
+                dv = _solve_contact(gap, R, alpha)
+            ts[ns] = t[k - 1] + (q + 1) * es
+            ds[ns] = dv
+            ns += 1
+    best = 0
+    for k in range(ns):
+        if ds[k] > ds[best]:
+            best = k
+    dmax = ds[best]
+    lo = max(best - 3, 0)
+    hi = min(best + 4, ns)
+    if hi - lo >= 4:
+        a = max(best - 1, lo)
+        b = min(best + 1, hi - 1)
+        _, v = peak(ts[lo:hi], ds[lo:hi], ts[a], ts[b])
+        if v > dmax:
+            dmax = v
+    return dmax
+
+
+@njit(cache=True)
+def _first_end(fl: np.ndarray) -> int:
+    """Index of the node ending the first contact (flag 2), 0 if none."""
+    for k in range(fl.shape[0]):
+        if fl[k] == 2:
+            return k
+    return 0
+
+
+@njit(cache=True)
+def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
+    """`solve_pair` with delta_max of each run's first contact from `dense_peak` (the scheme's own solution between
+    nodes) instead of the interpolant of the node values: the fine (base step H), coarse (2H) and coarsest (4H)
+    runs of one error estimate. Returns (status, n_nodes and series of the fine run, its contacts, the coarse
+    run's, the coarsest run's); contacts rows are (t_start, t_end, delta_max)."""
+    Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
+    # the 2H and 4H runs skip the modal energy (nobody reads it)
+    st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, False)
+    st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, False)
+    st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, 2)
+    if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
+        z = np.zeros((0, 3))
+        return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z
+    fine = _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
+    coarse = _dense_contacts(tc, dc, fc, xc, uc, flc, cnt_c, Er, Ei, Kr, Ki, ew, 1, 2.0 * H, R, alpha, m0, p)
+    coarsest = _dense_contacts(tcc, dcc, fcc, xcc, ucc, flcc, cnt_cc, Er, Ei, Kr, Ki, ew, 0, 4.0 * H, R, alpha, m0, p)
+    return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
+
+
+@njit(cache=True)
+def _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p):
+    """`contacts` of one run (its first cnt nodes) with the first contact's delta_max from `dense_peak`."""
+    c = contacts(t[:cnt], d[:cnt], fl[:cnt], f[:cnt], R)
+    end = _first_end(fl[:cnt])
+    if end > 2:
+        c[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p)
+    return c
+
 #: the observed ratio r = |x_2h - x_4h| / |x_h - x_2h| is trusted only up to r / RATIO_SAFETY: before the scheme is
 #: asymptotic (r < 2^(p+1) = 64) the next halving often gains less than the last one did (random scenes: the
 #: error of x_h was up to 2.2x above d1 / (r - 1) with r = 13 .. 34)
 RATIO_SAFETY = 1.5
-#: ratio trusted at most when x_h - x_2h and x_2h - x_4h differ in sign (random scenes: the error of x_h was then up
-#: to d1 / 5.3, e.g. a 1.6 kg ball on a 40-mode beam at tol 1e-4, errors +1.5e-7, +9.5e-7, -8.3e-6 at H, 2H, 4H)
-FLIP_RATIO = 4.0
+#: ratio trusted at most when x_h - x_2h and x_2h - x_4h differ in sign, i.e. the estimate is then d1 (random scenes:
+#: the error of x_h was up to d1 / 5.3, e.g. a 1.6 kg ball on a 40-mode beam at tol 1e-4, errors +1.5e-7, +9.5e-7,
+#: -8.3e-6 at H, 2H, 4H; without the cushion of the old unresolved-mode table up to 0.58 d1: a two-mode target at tol
+#: 1e-8, 1.7x above d1 / 3, the rule before)
+FLIP_RATIO = 2.0
 
 
 @njit(cache=True)
@@ -775,46 +939,52 @@ def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
 
 
 @njit(cache=True)
-def unresolved_factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
-    """Measured error factor C of one mode at phase theta = omega H per base step: the value of the first
-    table point >= theta (a step function), ~theta^6 below the table; above it the larger of the last
-    value and c_tab[-1] * sqrt(w) / 4 (the error of a stiff unresolved mode falls like w^-3, not w^-3.5)."""
-    k = 0
+def _factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray, r: int) -> float:
+    """`unresolved_factor` with row r of a 2-D table (no row view per call)."""
     nt = theta_tab.shape[0]
     if theta <= theta_tab[0]:
         x = theta / theta_tab[0]
         x2 = x * x
-        return c_tab[0] * x2 * x2 * x2
-    while k < nt and theta_tab[k] < theta:
-        k += 1
+        return c_tab[r, 0] * x2 * x2 * x2
+    k = np.searchsorted(theta_tab, theta)      # the first point >= theta
     if k < nt:
-        return c_tab[k]
-    return max(c_tab[nt - 1], 0.25 * c_tab[nt - 1] * sqrt_w)
+        return c_tab[r, k]
+    return max(c_tab[r, nt - 1], 0.25 * c_tab[r, nt - 1] * sqrt_w)
 
 
 @njit(cache=True)
-def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab: np.ndarray,
-               c_tab: np.ndarray) -> float:
-    """sum_i s_w[i] C(omega_i H, w_i): the bound for the error of modes the base step H does not resolve."""
+def unresolved_factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
+    """Measured error factor C of one mode at phase theta = omega H per base step (c_tab: one row of the table):
+    the value of the first table point >= theta (a step function), ~theta^6 below the table; above it the larger
+    of the last value and c_tab[-1] * sqrt(w) / 4 (the error of a stiff unresolved mode falls like w^-3, not
+    w^-3.5)."""
+    return _factor(theta, sqrt_w, theta_tab, c_tab.reshape((1, c_tab.shape[0])), 0)
+
+
+@njit(cache=True)
+def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.ndarray, H: float,
+               theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
+    """sum_i s_w[i] C_row[i](omega_i H, w_i): the bound for the error of modes the base step H does not resolve
+    (c_tab[r]: the table of modes of coupling class r, row[i] that of mode i)."""
     total = 0.0
     for i in range(omega.shape[0]):
-        total += s_w[i] * unresolved_factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab)
+        total += s_w[i] * _factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab, row[i])
     return total
 
 
 @njit(cache=True)
-def largest_step(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, H: float, theta_tab, c_tab,
-                 target: float) -> float:
+def largest_step(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.ndarray, H: float, theta_tab,
+                 c_tab, target: float) -> float:
     """The largest base step <= H whose unresolved-mode bound is <= target (bisection in log H)."""
-    if unresolved(s_w, omega, sqrt_w, H, theta_tab, c_tab) <= target:
+    if unresolved(s_w, omega, sqrt_w, row, H, theta_tab, c_tab) <= target:
         return H
     lo = H
-    while unresolved(s_w, omega, sqrt_w, lo, theta_tab, c_tab) > target and lo > 1e-30:
+    while unresolved(s_w, omega, sqrt_w, row, lo, theta_tab, c_tab) > target and lo > 1e-30:
         lo *= 0.125
     hi = H
     for _ in range(60):
         mid = np.sqrt(lo * hi)
-        if unresolved(s_w, omega, sqrt_w, mid, theta_tab, c_tab) > target:
+        if unresolved(s_w, omega, sqrt_w, row, mid, theta_tab, c_tab) > target:
             hi = mid
         else:
             lo = mid
@@ -842,7 +1012,7 @@ LIGHT_CAP = 0.5
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
                est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25,
-               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0):
+               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0, strong_s=np.inf, min_steps=0.0):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
@@ -853,10 +1023,13 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     s_w = np.empty(nm)
     sqrt_w = np.empty(nm)
     omega_c = np.empty(nm)
+    row = np.zeros(nm, dtype=np.int64)   # the table row: 0 for s <= strong_s, 1 (strongly coupled) above
     k_t = 1.5 * alpha * np.sqrt(delta_plate)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
         s_w[i] = m0 * g[i] * omega[i] * max(w, 1.0) ** -3.5     # a mode below the impact frequency: weight s
+        if m0 * g[i] * omega[i] > strong_s and c_tab.shape[0] > 1:
+            row[i] = 1
         sqrt_w[i] = np.sqrt(w)
         # the frequency a mode rings at while the contact spring (tangent stiffness at the rigid-plate peak)
         # holds it: a light mode (large s) is stiffened far above omega and needs shorter steps
@@ -869,16 +1042,17 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
             s_light += m0 * g[i] * omega[i]
     for i in range(nm):
         s_w[i] *= 1.0 + min(light_coupling * s_light, LIGHT_CAP)
-    n = n0
+    n = max(n0, min_steps)
     if nm > 0:
-        n = t_plate / largest_step(s_w, omega_c, sqrt_w, t_plate / n, theta_tab, c_tab, unresolved_share * tol)
+        n = t_plate / largest_step(s_w, omega_c, sqrt_w, row, t_plate / n, theta_tab, c_tab,
+                                     unresolved_share * tol)
     for _ in range(12):
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
         cap = node_cap // 4             # the first contact: a quarter of a window's budget
         max_nodes = min(int(6 * n + 60 * J + 50), cap)
         while True:
-            out = solve_pair(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, 0.0, max_nodes)
+            out = solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, max_nodes)
             if out[0] == STATUS_OK or max_nodes >= cap:
                 break
             max_nodes = min(4 * max_nodes, cap)
@@ -893,7 +1067,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         rel_t = richardson(tm_f, tm_c, tm_cc, est_order) / tm_f
         rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
         rel = max(rel_t, 1.5 * rel_d)
-        rel += unresolved(s_w, omega_c, sqrt_w, H, theta_tab, c_tab)
+        rel += unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab)
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
             break
@@ -915,6 +1089,9 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         t, d, f, x, u, e, fl = t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(), \
             e[:cnt].copy(), fl[:cnt].copy()
         fine = contacts(t, d, fl, f, R)
+        end = _first_end(fl)
+        if end > 2:         # the first contact's peak as in the estimate (the same run up to there)
+            fine[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
     # the first contact's end node (ball velocity there = rebound) and the largest energy drift
     end = 0
     for k in range(cnt):

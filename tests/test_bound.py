@@ -104,9 +104,10 @@ def test_uncertainty_bounds_the_ode_form_on_random_scenes(seed):
                          ids=["150-scenes", "1000-scenes"])
 def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds):
     """Random scenes (up to 160 modes, with and without residual flexibility) at tol 1e-4, 1e-6, 1e-8 against the
-    same model at tol 1e-12: the real error never exceeds the reported uncertainty (measured: 0 of 11,648
-    comparisons on seeds 0-3999; before the smallest-step, sign-change and light-mode rules of docs/reference.md
-    5 of 1,901 were above, 1.08-1.69x). The median of reported / real is below 10 (6.8 measured)."""
+    same model at tol 1e-12: the real error never exceeds the reported uncertainty (measured with the dense peak: 0 of
+    11,343 comparisons on seeds 0-3999, 2 of 11,364 on seeds 4000-7999, 1.09x and 1.69x, where the estimate before
+    the dense peak had 2 of 11,448, 1.36x and 1.42x; docs/reference.md). The median of reported / real is below 10
+    (6.9 measured)."""
     ratios, misses = [], []
     for seed in seeds:
         scene, md, n, residual = _modes_case(seed)
@@ -173,17 +174,16 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 
 
 #: catalogue and tests' scenes whose reported uncertainty at tol 1e-6 is more than 10x the real error (measured
-#: ratio x 1.5; docs/reference.md): automatic-mode beams, where the unresolved-mode bound (a sum of per-mode worst
-#: cases) dominates, and the Timoshenko beams, whose truncation ratio is trusted to 2x per doubling only.
-#: Asserted honest and not looser than this.
-TEN_X_MISSES = {"beam_cantilever_tip": 21, "beam_ss_stubby_timoshenko": 107, "heavy_ball_slender_beam": 26,
-                "cantilever_titanium": 26, "cc_aluminium_0p3": 29, "heavy_wc_slender": 49, "stubby_steel": 15,
-                "stubby_steel_timoshenko": 38, "heavy_wc_slender_timoshenko": 250, "al_cantilever_glass": 36,
-                "steel_cc_pmma_ball": 45, "ti_ss_steel_heavy": 24, "glass_on_pmma": 40, "rand_glass_on_pmma_ss": 20,
-                "rand_wc_on_pmma_cc": 27}
-#: measured within 10x at tol 1e-6 (catalogue scenes added later are held to 10x too; scenes added to tests/unseen
-#: later are checked for honesty only until measured and listed here or above)
-WITHIN_10X = ("rand_wc_on_steel_cantilever",)
+#: ratio x 1.5, never above the guard held before; docs/reference.md): automatic-mode beams whose time-step
+#: uncertainty (Richardson before the asymptotic range) or truncation estimate is loose. Asserted honest and not
+#: looser than this.
+TEN_X_MISSES = {"heavy_ball_slender_beam": 18, "al_cantilever_glass": 22, "cantilever_titanium": 23,
+                "heavy_wc_slender": 28, "steel_cc_pmma_ball": 43, "stubby_steel": 15}
+#: tests/unseen scenes measured within 10x at tol 1e-6 (catalogue scenes not in TEN_X_MISSES are held to 10x, and so
+#: are catalogue scenes added later; scenes added to tests/unseen later are checked for honesty only until measured
+#: and listed here or above)
+WITHIN_10X = ("rand_wc_on_steel_cantilever", "cc_aluminium_0p3", "glass_on_pmma", "heavy_wc_slender_timoshenko",
+              "rand_glass_on_pmma_ss", "rand_wc_on_pmma_cc", "stubby_steel_timoshenko", "ti_ss_steel_heavy")
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]
@@ -213,3 +213,32 @@ def test_catalogue_uncertainty_is_within_10x_of_the_real_error(name):
     if "/" in name and stem not in TEN_X_MISSES and stem not in WITHIN_10X:
         return                 # a tests/unseen scene not measured yet: honesty only (above)
     assert ratio <= TEN_X_MISSES.get(stem, 10.0), f"{stem}: reported / real = {ratio:.1f}"
+
+
+@pytest.mark.parametrize("w, theta", [(30.0, 3.0), (100.0, 3.5), (300.0, 2.5)])
+def test_dense_peak_follows_the_ringing_between_nodes(w, theta):
+    """delta carries each mode's ringing (amplitude ~ s w^-3.5); nodes omega H = 2.5-3.5 apart cannot interpolate it.
+    The dense peak (kernel.dense_peak: the modes swept again and the peak found on sub-steps) against the ODE form
+    (DOP853, rtol 1e-13) is >= 10x closer than the interpolant of the node values was, and never below the largest
+    node value."""
+    from impactval.reference import kernel
+    from impactval.reference.beams import Modes
+    from impactval.reference.solve import GRADING_WINDOW, P_DEGREE, SMALLEST_STEP_FACTOR, _select
+
+    m0, alpha, v0, s = 0.0327, 1.5384e10, 1.0, 1.0
+    p = plate_impact(m0, alpha, v0)
+    omega_i = w * v0 / p.delta_m
+    md = Modes(np.array([omega_i]), np.array([m0 / s]), np.array([1.0]))
+    truth, _ = solve_ode(md, m0, alpha, v0, rtol=1e-13, atol=1e-15)
+    n = omega_i * p.t_m / theta
+    omega, g, ew = _select(md)
+    J = kernel.levels(n, 1e-8, SMALLEST_STEP_FACTOR)
+    out = kernel.solve_triple(omega, g, ew, m0, alpha, v0, 0.0, p.t_m / n, J, P_DEGREE, GRADING_WINDOW * p.t_m,
+                              int(6 * n + 60 * J + 50))
+    t, d, f, fl = out[2], out[3], out[4], out[8]
+    node_peak = kernel.contacts(t, d, fl, f, 0.0)[0, 2]
+    dense = out[9][0, 2]
+    err_nodes, err_dense = abs(node_peak / truth.delta_m - 1), abs(dense / truth.delta_m - 1)
+    assert err_dense * 10 <= err_nodes, (err_dense, err_nodes)
+    assert dense >= d.max() * (1 - 1e-12)
+    print(f"w {w:g}, omega H {theta:g}: node peak {err_nodes:.2e}, dense peak {err_dense:.2e}")

@@ -95,45 +95,58 @@ def test_automatic_mode_count_meets_tolerance(name):
         assert err <= getattr(r.uncertainty, key) <= 1e-6 * getattr(r, key)
 
 
-@pytest.mark.parametrize("w", [4.0, 12.0, 40.0, 130.0, 400.0])
-def test_unresolved_mode_error_table(w):
-    """The table behind the unresolved-mode bound: what the Richardson estimate misses of one mode's error
-    (beyond the plate's own) stays below C(omega H) s w^-3.5 at every base step, and the table is not loose
-    where modes are unresolved."""
+def _table_excess(w: float, s: float) -> list[float]:
+    """Assert that what the Richardson estimate misses of one mode's error (beyond the plate's own) stays below
+    C(omega_c H) s w^-3.5 at every base step (the table row of the mode's coupling class), with the metrics solve_auto
+    computes (kernel.solve_triple: delta_max from the dense peak); return excess / bound where omega_c H > 2."""
     from impactval.reference.beams import Modes
-    from impactval.reference.solve import UNRESOLVED_C, UNRESOLVED_THETA
+    from impactval.reference.solve import UNRESOLVED_C, UNRESOLVED_STRONG_S, UNRESOLVED_THETA
 
     m0, alpha, v0 = 0.0327, 1.5384e10, 1.0
     p = plate_impact(m0, alpha, v0)
-    s = 0.3
     empty = Modes(np.zeros(0), np.zeros(0), np.zeros(0))
-    one = Modes(np.array([w * v0 / p.delta_m]), np.array([m0 / s]), np.array([1.0]))
+    omega = w * v0 / p.delta_m
+    one = Modes(np.array([omega]), np.array([m0 / s]), np.array([1.0]))
+    omega_c = math.sqrt(omega**2 + 1.5 * alpha * math.sqrt(p.delta_m) * s / m0)
+    row = UNRESOLVED_C[1 if s > UNRESOLVED_STRONG_S else 0]
 
-    def pair(md, n, tol):
+    def triple(md, n, tol):
         """(t_m, delta_m) of the fine run and the Richardson estimate (relative, as in solve_auto)."""
         omega, g, ew = _select(md)
-        J = kernel.levels(n, tol, 1e-3)
-        out = kernel.solve_pair(omega, g, ew, m0, alpha, v0, 0.0, p.t_m / n, J, P_DEGREE, 0.2 * p.t_m, 0.0,
-                                int(6 * n + 60 * J + 50))
-        fine, coarse = out[9], out[10]
-        a = np.array([fine[0, 1] - fine[0, 0], fine[0, 2]])
-        b = np.array([coarse[0, 1] - coarse[0, 0], coarse[0, 2]])
-        return a, np.max(np.abs(a - b) / a * [1.0, 1.5]) / 15.0
+        J = kernel.levels(n, tol, 1e-5)
+        out = kernel.solve_triple(omega, g, ew, m0, alpha, v0, 0.0, p.t_m / n, J, P_DEGREE, 0.2 * p.t_m,
+                                  int(6 * n + 60 * J + 50))
+        x = np.array([[c[0, 1] - c[0, 0], c[0, 2]] for c in out[9:12]])
+        rich = max(kernel.richardson(*x[:, 0], 4.0) / x[0, 0], 1.5 * kernel.richardson(*x[:, 1], 4.0) / x[0, 1])
+        return x[0], rich
 
     def err(x, truth):            # relative, f_m = alpha delta_m^1.5 counted as 1.5x delta_m's
         return np.max(np.abs(x - truth) / truth * [1.0, 1.5])
 
-    truth_plate, _ = pair(empty, 3000, 1e-12)
-    truth, _ = pair(one, 3000, 1e-12)
+    truth_plate, _ = triple(empty, 3000, 1e-12)
+    truth, _ = triple(one, 3000, 1e-12)
     ratios = []
     for n in np.unique(np.round(np.logspace(np.log10(12), np.log10(500), 24)).astype(int)):
         for tol in (1e-5, 1e-8):
-            theta = w * v0 / p.delta_m * p.t_m / n
-            c = kernel.unresolved_factor(theta, math.sqrt(w), UNRESOLVED_THETA, UNRESOLVED_C)
-            x, rich = pair(one, n, tol)
-            excess = err(x, truth) - rich - err(pair(empty, n, tol)[0], truth_plate)
+            theta = omega_c * p.t_m / n
+            c = kernel.unresolved_factor(theta, math.sqrt(w), UNRESOLVED_THETA, row)
+            x, rich = triple(one, n, tol)
+            excess = err(x, truth) - rich - err(triple(empty, n, tol)[0], truth_plate)
             assert excess <= c * s * w**-3.5 + 1e-14, f"n={n}, theta={theta:.2f}: {excess:.3g} > {c * s * w**-3.5:.3g}"
-            if theta > 3.0:
+            if theta > 2.0:
                 ratios.append(excess / (c * s * w**-3.5))
-    if ratios:     # where the mode is unresolved the table is within ~20x of the worst excess seen
-        assert max(ratios) > 0.05
+    return ratios
+
+
+@pytest.mark.parametrize("s", [0.3, 3.0])
+@pytest.mark.parametrize("w", [4.0, 12.0, 40.0, 130.0, 400.0])
+def test_unresolved_mode_error_table(w, s):
+    """The table behind the unresolved-mode bound (measured by benchmarks/unresolved_table.py on a denser grid) holds
+    for single modes of both coupling classes."""
+    _table_excess(w, s)
+
+
+def test_unresolved_mode_error_table_is_not_loose():
+    """Where beams have most of their unresolved modes (s < 1, w ~ 100), the table is within 20x of the worst excess
+    (measured 0.19 of the bound at w = 130, s = 0.3)."""
+    assert max(_table_excess(130.0, 0.3)) > 0.05
