@@ -282,12 +282,13 @@ class ExudynAdapter(EngineAdapter):
             om = modal_omega_max(structure.omega, np.diag(structure.mass_reduced), structure.phi_contact,
                                  scene.ball.mass, k)
         integ = settings.integrator or self.integrators[0]
+        diag["integrator"] = integ          # also on a row refused before stepping (its series in a sweep)
         bound = {"explicit-euler": 2.0, "rk44": 2.0 * math.sqrt(2.0), "rk67": 3.0}.get(integ, 2.0)
         return Plan(bound / om, f"{integ}, modal body + ball + contact spring {k:.3g} N/m", err, diag)
 
     # ------------------------------------------------------------------ structure
     def _structure(self, scene, settings: EngineSettings) -> _Structure | _Cable | None:
-        key = (scene, settings.modes, settings.option("beam_model"), settings.option("fe_elements"),
+        key = (scene, settings.modes, settings.segments, settings.option("beam_model"), settings.option("fe_elements"),
                settings.option("beam_elements"), settings.option("mode_tol", DEFAULT_MODE_TOL))
         memo = getattr(self, "_memo", None)
         if memo is not None and memo[0] == key:
@@ -306,8 +307,18 @@ class ExudynAdapter(EngineAdapter):
             raise EngineError(f"exudyn: target kind {target.kind!r} is not supported (rigid-plate, beam, modal, ball are).")
         mode_tol = float(settings.option("mode_tol", DEFAULT_MODE_TOL))
         kind = beam_model_of(scene, settings)
-        if kind == "fe-beam":
-            return _cable_structure(scene, mode_tol, settings.modes, settings.option("beam_elements"))
+        if kind == "fe-beam":       # `segments` (the run table's N) is the mesh's element count, as beam_elements
+            elements = settings.option("beam_elements")
+            if settings.segments is not None:
+                if elements and int(elements) != settings.segments:
+                    raise EngineError(f"exudyn: segments = {settings.segments} and option beam_elements = {elements} "
+                                      f"disagree (both set the fe-beam's element count); give one.")
+                elements = settings.segments
+            return _cable_structure(scene, mode_tol, settings.modes, elements)
+        if settings.segments is not None:   # silently ignored before, with the row showing N = segments
+            raise EngineError(f"exudyn: segments = {settings.segments} sizes a chain or the fe-beam's elements; the "
+                              f"{kind!r} beam model is sized by --modes (and option fe_elements): leave segments at "
+                              f"the engine default for exudyn (sweep: --segments pybullet.11,pybullet.35 sizes PyBullet only).")
         if kind == "reference-modes":
             n = settings.modes or default_modes(scene, mode_tol, MAX_REFERENCE_MODES)
             return _reference_modes_structure(target, n)

@@ -513,7 +513,7 @@ class MujocoAdapter(SteppingAdapter):
             law = ContactLaw.hertz(scene.alpha)
         om, what = omega_max(scene, law, chain)
         integ = settings.integrator or INTEGRATORS[0]
-        diag: dict = {}
+        diag: dict = {"integrator": integ}     # also on a row refused before stepping (its series in a sweep)
         notes: list[str] = []
         err = math.nan
         if chain is not None:

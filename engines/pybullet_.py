@@ -279,7 +279,7 @@ class PybulletAdapter(SteppingAdapter):
         if settings.contact == "native-hertz":
             law = ContactLaw.hertz(scene.alpha)
         om, what = omega_max(scene, law, chain)
-        diag: dict = {"omega_max": om}
+        diag: dict = {"omega_max": om, "integrator": self.integrators[0]}
         notes: list[str] = []
         err = 0.0
         if chain is not None:

@@ -57,8 +57,8 @@ class _Group(click.Group):
         except BrokenPipeError:       # the reader went away (`impactval scenes | head -1`): stop quietly
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             ctx.exit(0)
-        except click.exceptions.ClickException:
-            raise
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise                     # click's own exits (`--help`, usage errors, aborted prompts): not bugs
         except Exception as err:  # noqa: BLE001 - a bug: one line, the traceback on request (issue 18)
             if os.environ.get("IMPACTVAL_DEBUG"):
                 raise
@@ -166,7 +166,8 @@ def _explain(sc, tol: float) -> None:
 
     c = required_modes(sc, min(max(tol, 1e-8), 0.5))
     if len(c.s) == 0:
-        click.echo("  rigid plate: no structure modes")
+        click.echo("  ball target: no structure modes (a second free sphere: two-body Hertz)" if sc.target.kind == "ball"
+                   else "  rigid plate: no structure modes")
         return
     e = c.structure_effect
     click.echo(f"  structure effect (first order): t_m {100 * e.t_m:+.3f} %, f_m {100 * e.f_m:+.3f} %, "
@@ -178,12 +179,13 @@ def _explain(sc, tol: float) -> None:
         click.echo(f"  ! structure effect and mode weights are first-order: {warning.split(': ', 1)[1]}")
     click.echo(f"  modes needed (first-order weights, a-priori, safety factor {1 / SAFETY:g}): {c.count} with the residual "
                f"static flexibility, {c.count_without_residual} without it")
-    if sc.target.kind == "beam" and getattr(sc.target, "modes", None) is None:
+    if sc.target.kind in ("beam", "plate") and getattr(sc.target, "modes", None) is None:
         import impactval
 
         solved = impactval.solve(sc, tol=c.tol).modes
+        each = ", each with the residual," if sc.target.kind == "beam" else ""
         click.echo(f"  modes the solve used at tol {c.tol:g}: {solved} (measured: doubled until the n- and 2n-mode "
-                   f"models, each with the residual, agree within tol; the first-order count above is a bound "
+                   f"models{each} agree within tol; the first-order count above is a bound "
                    f"from weights, so it is {'larger' if c.count > solved else 'smaller' if c.count < solved else 'the same'})")
     elif sc.target.kind != "rigid-plate":
         click.echo(f"  modes the solve used: {len(sc.target.omega) if sc.target.kind == 'modal' else sc.target.modes} "

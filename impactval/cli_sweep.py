@@ -126,8 +126,9 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
                        f"N = {c['segments'] or 'default'}: {1e3 * c['cost_s']:.3g} ms stepping, "
                        f"largest error {100 * c['score']:.3g} %")
         else:
-            click.echo(f"{c['scene']} / {c['engine']} under {100 * c['under']:g} %: none in this grid "
-                       f"(best {100 * c['best_score']:.3g} %)")
+            best = (f"best {100 * c['best_score']:.3g} %" if c["best_score"] == c["best_score"]
+                    else "no cell has a result: see sweep.md")
+            click.echo(f"{c['scene']} / {c['engine']} under {100 * c['under']:g} %: none in this grid ({best})")
     click.echo(f"report: {Path(out) / 'sweep.md'}")
 
 

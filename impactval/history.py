@@ -172,6 +172,28 @@ def _ok(status) -> bool:
     return str(status) == "ok"
 
 
+#: key fields a job without a result may not know (a timeout or a dead worker reports no integrator and no N)
+UNREPORTED = ("integrator", "segments")
+
+
+def _unreported_match(row, base: dict) -> pd.Series | None:
+    """The one baseline row that matches when a row without a result (on either side) leaves the fields it
+    could not report (UNREPORTED) empty: a job that newly times out or crashes is `!` newly failing, one that
+    timed out before and runs now `*` fixed, not `x` not comparable (cc_short_heavy_ball at --timeout 1: six
+    newly failing jobs passed a night with exit 0)."""
+    key = row_key(row)
+    found = []
+    for k, o in base.items():
+        # two results know their integrator; an empty N on a result is a target without a structure to size (a
+        # rigid plate, a second ball), where older rows showed the asked --segments
+        free = UNREPORTED if not (_ok(row["status"]) and _ok(o["status"])) else ("segments",)
+        idx = [i for i, name in enumerate(KEY) if name in free]
+        if all(a == b for i, (a, b) in enumerate(zip(key, k)) if i not in idx) and \
+                all(key[i] == k[i] or "" in (key[i], k[i]) for i in idx):
+            found.append(o)
+    return found[0] if len(found) == 1 else None
+
+
 def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, ThresholdCheck] | None = None) -> pd.DataFrame:
     """One row per new row: KEY, versions, statuses, old and new error and relative change of |error|
     per metric (`old_err_f_m`, `err_f_m`, `change_f_m`, ...), the mark (see module doc), `why` (the
@@ -186,6 +208,8 @@ def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, Thre
     rows = []
     for _, r in new.iterrows():
         o = base.get(row_key(r))
+        if o is None:
+            o = _unreported_match(r, base)
         out = {k: r[k] for k in KEY}
         out.update(version=str(r.get("version", "") or ""), old_version="" if o is None else str(o.get("version", "") or ""),
                    status=str(r["status"]), old_status="" if o is None else str(o["status"]),
@@ -222,7 +246,8 @@ def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, Thre
                 mark, why = "+", "; ".join(worse)
             elif better:
                 mark, why = "-", "; ".join(better)
-        if mark in ("+", "-", "!", "*") and out["old_version"] != out["version"]:
+        if mark in ("+", "-", "!", "*") and out["old_version"] and out["version"] and out["old_version"] != out["version"]:
+            # (a job without a result may report no version: that is no upgrade)
             why += f" (engine version {out['old_version'] or '?'} -> {out['version'] or '?'})"
         out.update(mark=mark, why=why, changed=changed)
         old_s, new_s = out["old_score"], out["score"]

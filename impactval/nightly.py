@@ -204,6 +204,9 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         if not scene_objs:
             tags = sorted({t for n in catalogue_names() for t in impactval_tags(n)})
             raise ImpactvalError(f"--suite {suite!r}: no catalogue scene carries this tag; tags: {', '.join(tags)}.")
+    from impactval.runner import unique_scenes
+
+    scene_objs = unique_scenes(scene_objs)          # two different scenes with one name: refused before any write
     if engines is None:
         specs = [n for n, s in engine_status().items() if s == "ok"]
         if not specs:
@@ -239,7 +242,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         except RunInterrupted as stop:
             export(db, out)
             write_report(db, stop.run_id, out, title=f"impactval nightly ({suite}): interrupted", settings=settings,
-                         tol=tol, html=html, extra_info={"suite": suite})
+                         tol=tol, html=html, extra_info={"suite": suite}, scenes={s.name: s for s in scene_objs})
             raise
         df = pd.DataFrame(rows)
         export(db, out)
@@ -294,6 +297,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
             db, run_id, out, title=f"impactval nightly ({suite})", rows=df, cmp=cmp,
             baseline=None if base is None else f"run `{base['id']}` of {str(base['started_at'])[:19]}",
             checks=checks, history=hist, trend=trend, settings=settings, tol=tol, html=html,
+            scenes={s.name: s for s in scene_objs},
             extra_info={"suite": f"{suite} ({len(scene_objs)} scenes x {len(specs)} engines), night {night}",
                         "verdict": f"exit {code}: {message}"},
             extra_md=verdict_md)
@@ -342,6 +346,16 @@ def all_runs(store) -> pd.DataFrame:
     with store.engine.connect() as c:
         return pd.DataFrame([dict(x) for x in c.execute(q).mappings()],
                             columns=["id", "command", "tag", "status", "started_at", "ended_at", "n_jobs"])
+
+
+def is_dt_sweep(rows: pd.DataFrame) -> bool:
+    """True when one scene/engine/contact/integrator ran at several time steps (`run --dt a,b,c`); a run at
+    dt = auto has one step per engine and scene, several in all."""
+    if not len(rows) or "dt" not in rows:
+        return False
+    d = rows.assign(_dt=pd.to_numeric(rows["dt"], errors="coerce")).dropna(subset=["_dt"])
+    keys = [k for k in ("scene", "engine", "contact", "integrator") if k in d]
+    return bool(len(d)) and bool((d.groupby(keys, dropna=False)["_dt"].nunique() > 1).any())
 
 
 def render_stored(where: str, run_id: str | None = None, out: str | Path | None = None, tol: float = 1e-6,
@@ -396,7 +410,7 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
         else:
             rows = db.rows(run_id=run["id"])
             extra = ""
-            if pd.to_numeric(rows["dt"], errors="coerce").nunique() > 1:      # a speed/accuracy sweep
+            if is_dt_sweep(rows):      # a speed/accuracy sweep (not dt = auto: each engine its own step)
                 from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table
 
                 extra = speed_accuracy_table(rows)

@@ -23,7 +23,7 @@ import uuid
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import pandas as pd
 
@@ -173,6 +173,19 @@ class TheoryGap:
     timoshenko_frequencies: tuple[float, ...] = field(default=())
 
 
+def _structure_size(scene, rs: Mapping[str, Any], settings: EngineSettings, diag: Mapping[str, Any]) -> str:
+    """The run table's N: chain segments, fe-beam elements or the modes of a modal body, as the engine used them
+    (its result settings, then what was asked, then a refused row's plan); none for a target without a structure
+    to size (a rigid plate, a second ball: `--segments 35` showed N = 35 there) and, for a modal target, only the
+    modes an engine reports (the scene's own)."""
+    kind = getattr(scene.target, "kind", "")
+    if kind in ("rigid-plate", "ball"):
+        return ""
+    order = (rs.get("modes"),) if kind == "modal" else (rs.get("segments"), rs.get("modes"), settings.segments,
+                                                        settings.modes, diag.get("segments"))
+    return str(next((v for v in order if v not in (None, "", 0)), ""))
+
+
 def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
              lin: ImpactResult | None, job_key: str = "", theory: TheoryGap | None = None) -> dict[str, Any]:
     """One results row (see COLUMNS; errors are signed fractions (engine - reference) / reference).
@@ -192,10 +205,10 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         schema_version=SCHEMA_VERSION, job_key=job_key, run_id=run_id, scene=scene.name,
         scene_hash=scene_hash(scene), engine=res.source or spec,
         version=res.version, model=res.model, contact=settings.contact,
-        integrator=rs.get("integrator") or settings.integrator or "", dt=dt,
-        # structure size: chain segments, or the mode count of a modal (FFRF) body
-        segments=str(next((v for v in (rs.get("segments"), settings.segments, rs.get("modes"), settings.modes)
-                           if v not in (None, "", 0)), "")),
+        integrator=rs.get("integrator") or settings.integrator or diag.get("integrator") or "", dt=dt,
+        # structure size: chain segments, or the mode count of a modal (FFRF) body; a row refused before
+        # stepping has the planned size in its diagnostics (so it joins its series: sweep's stability table)
+        segments=_structure_size(scene, rs, settings, diag),
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
@@ -589,9 +602,25 @@ def _adapter_version(spec: str) -> str:
     return adapter_version(spec)
 
 
+def unique_scenes(scenes: Iterable) -> list:
+    """The scenes once each; two different scenes with one name are refused (rows, reports and baselines key on
+    the name: two glass-beam files both named ss_glass_wc_fast ran as indistinguishable rows)."""
+    out: dict[str, Any] = {}
+    for scene in scenes:
+        seen = out.get(scene.name)
+        if seen is None:
+            out[scene.name] = scene
+        elif scene_hash(seen) != scene_hash(scene):
+            where = [str(getattr(s, "source", "") or "(built in Python)") for s in (seen, scene)]
+            raise ImpactvalError(f"two different scenes are named {scene.name!r} ({where[0]}; {where[1]}): rows and "
+                                 f"reports key on the name; give one of them its own `name = \"...\"`.")
+    return list(out.values())
+
+
 def build_jobs(scenes: Iterable, specs: list[str], variants: list[EngineSettings], tol: float) -> list[Job]:
-    """Scene-major job list: for each scene, each settings variant, each engine."""
-    return [Job(scene, spec, settings_for(v, spec), tol) for scene in scenes for v in variants for spec in specs]
+    """Scene-major job list: for each scene (once; unique_scenes), each settings variant, each engine."""
+    return [Job(scene, spec, settings_for(v, spec), tol) for scene in unique_scenes(scenes) for v in variants
+            for spec in specs]
 
 
 def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: EngineSettings | None = None, *,
@@ -677,6 +706,7 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         scene_objs += [s for s in tagged if s.name not in {x.name for x in scene_objs}]
     if not scene_objs:
         raise ImpactvalError("no scene given; see `impactval scenes`.")
+    scene_objs = unique_scenes(scene_objs)          # before anything is written
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
         if store is None:
@@ -721,7 +751,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         notes = export(db, out)
         # report.md + figures + report.html, from the store (presentation lives in reports/)
         write_report(db, run_id, out, rows=df, cmp=cmp, baseline=None if baseline is None else f"`{baseline}`",
-                     checks=threshold, settings=settings, tol=tol, extra_md=extra)
+                     checks=threshold, settings=settings, tol=tol, extra_md=extra,
+                     scenes={s.name: s for s in scene_objs})
     df.attrs["notes"] = notes
     info = db.run_info(run_id)
     df.attrs.update(run_id=info["id"], n_reused=info["n_reused"], status=info["status"])

@@ -161,16 +161,18 @@ def build_jobs(scenes: Iterable, engines: Iterable[str], base, *, dt: dict[str, 
     no structure: its segments and modes axes collapse to the default.
     """
     from impactval.engines.base import EngineSettings  # noqa: F401 - the settings type of `base`
-    from impactval.runner import settings_for
+    from impactval.runner import settings_for, unique_scenes
 
     engines = list(engines)
     jobs = []
-    for scene in scenes:
-        rigid = getattr(scene.target, "kind", "") == "rigid-plate"      # no structure to size
+    for scene in unique_scenes(scenes):
+        kind = getattr(scene.target, "kind", "")
+        rigid = kind in ("rigid-plate", "ball")         # no structure to size (a second ball is a free mass)
+        given = kind == "modal"                         # the scene's own modes: no chain, no mode count to choose
         for eng in engines:
             ints = (integrator or {}).get(eng) or [base.integrator]
-            segs = [None] if rigid else (segments or {}).get(eng) or [base.segments]
-            mods = [None] if rigid else (modes or {}).get(eng) or [base.modes]
+            segs = [None] if rigid or given else (segments or {}).get(eng) or [base.segments]
+            mods = [None] if rigid or given else (modes or {}).get(eng) or [base.modes]
             dts = (dt or {}).get(eng) or [base.dt]
             for integ in ints:
                 for seg in segs:

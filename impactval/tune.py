@@ -96,13 +96,30 @@ def contact_mass(scene) -> float:
     return _contact_mass(scene)
 
 
-def default_dt(scene, speeds: Sequence[float]) -> float:
+def default_dt(scene, speeds: Sequence[float], engine: str | None = None, contact: str = "native",
+               integrator: str | None = None) -> float:
     """A fixed engine step [s]: the shortest rigid-plate Hertz contact time over `speeds` / 2000,
-    rounded down to a 1-2-5 value (one dt for every speed, so an emitted ERP/CFM pair stays valid)."""
-    from impactval.engines.base import nice_step
+    rounded down to a 1-2-5 value (one dt for every speed, so an emitted ERP/CFM pair stays valid); with
+    `engine`, also at most DT_MARGIN x the engine model's predicted explicit stability limit at the fastest
+    speed (a beam chain's own modes: on cc_short_heavy_ball the contact alone gave 2e-7 s, above PyBullet's
+    chain limit 1.7e-7 s, and every fit run was refused as unstable)."""
+    from impactval.engines.base import DT_MARGIN, EngineSettings, nice_step
 
     t_short = min(plate_impact(contact_mass(scene), scene.alpha, v).t_m for v in speeds)
-    return nice_step(t_short / STEPS_PER_SHORTEST_CONTACT)
+    dt = nice_step(t_short / STEPS_PER_SHORTEST_CONTACT)
+    if engine is None or scene.target.kind in ("rigid-plate", "ball"):
+        return dt                       # no structure: the contact time sets the step
+    from impactval.engines.base import EngineError, load_adapter
+
+    adapter = load_adapter(engine)
+    try:
+        plan = adapter.plan(at_speed(scene, max(speeds)),
+                            adapter.check_settings(EngineSettings(dt=dt, contact=contact, integrator=integrator)))
+    except EngineError:                 # an unsupported scene: the engine run says so, as a status row
+        return dt
+    if math.isfinite(plan.dt_limit) and plan.dt_limit > 0:
+        dt = min(dt, nice_step(DT_MARGIN * plan.dt_limit))
+    return dt
 
 
 # ---------------------------------------------------------------------------- reference targets
@@ -480,7 +497,7 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
                              f"approach speeds onto a second ball at rest; set target.velocity = 0 and give the "
                              f"relative speeds (v1 + v2) in --speeds (the contact depends on those only).")
     speeds = [float(v) for v in speeds]
-    dt = float(dt) if dt is not None else default_dt(scene, speeds)
+    dt = float(dt) if dt is not None else default_dt(scene, speeds, engine, contact, integrator)
     targets = hertz_targets(scene, speeds, tol)
     mass, alpha = contact_mass(scene), scene.alpha
     v_mid = middle_speed(speeds)

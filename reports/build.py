@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import pandas as pd
@@ -33,10 +34,34 @@ def _label(r, several: bool) -> str:
     return f"{r['engine']} {r['contact']} dt={_dt(r['dt'])}" + (f" N={seg}" if seg not in ("", "nan") else "")
 
 
-def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True
-                  ) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
+def scenes_from_command(command: str) -> dict[str, Any]:
+    """Scene files (*.toml) named in a stored run's command line that load here, by scene name: a re-rendered
+    report of a run of scene files gets its references back (scene_figures checks each one's hash against the
+    rows', so an edited file is reported as changed, not used)."""
+    import shlex
+
+    import impactval
+
+    try:
+        tokens = shlex.split(command)
+    except ValueError:
+        return {}
+    out = {}
+    for tok in tokens:
+        if tok.endswith(".toml") and Path(tok).is_file():
+            try:
+                scene = impactval.load_scene(tok)
+            except ImpactvalError:
+                continue
+            out.setdefault(scene.name, scene)
+    return out
+
+
+def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True,
+                  scenes: Mapping[str, Any] | None = None) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
     """Force-curve figures (caption, file name), the reference table (reports.provenance records)
-    and notes, for every scene of `rows`."""
+    and notes, for every scene of `rows`. `scenes`: the run's Scene objects by name (scene files given as
+    paths are not in the catalogue); a scene not there is looked up in the catalogue."""
     import impactval
     from impactval.reports.plots import finite_series, force_curves_plot, thin
     from impactval.reports.provenance import reference_record
@@ -46,9 +71,11 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
     for name in dict.fromkeys(rows["scene"]):
         g = rows[rows["scene"] == name]
         try:
-            scene = impactval.load_scene(name)
+            scene = (scenes or {}).get(name) or impactval.load_scene(name)
         except ImpactvalError:
-            notes.append(f"{name}: not in the catalogue here; no reference curve or provenance")
+            notes.append(f"{name}: not in the catalogue here, and no scene file of that name on the run's command line "
+                         f"is found from here (the store keeps no scene definitions; re-render from the directory the "
+                         f"run started in); no reference curve or provenance")
             continue
         if str(g["scene_hash"].iloc[0]) != scene_hash(scene):
             notes.append(f"{name}: the scene or reference changed since this run (scene hash "
@@ -99,7 +126,8 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
                  cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
                  history: pd.DataFrame | None = None, trend: pd.DataFrame | None = None, settings=None,
                  tol: float = 1e-6, extra_info: dict[str, Any] | None = None, extra_md: str = "",
-                 html: bool = True, plots: bool = True) -> tuple[Path, Path | None]:
+                 html: bool = True, plots: bool = True, scenes: Mapping[str, Any] | None = None
+                 ) -> tuple[Path, Path | None]:
     """Write out/report.md (+ PNG figures) and out/report.html for run `run_id` of `store`.
 
     `history`: rows of the last nights (run_index, night, mark, ...) for the trend plots; `trend`:
@@ -113,7 +141,9 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
     out.mkdir(parents=True, exist_ok=True)
     rows = store.rows(run_id=run_id) if rows is None else rows
     plots = plots and importlib.util.find_spec("matplotlib") is not None
-    figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots)
+    if scenes is None:          # a re-render: the scene files named on the run's command line, where still found
+        scenes = scenes_from_command(str(store.run_info(run_id).get("command") or ""))
+    figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots, scenes=scenes)
     if plots and history is not None and len(history) and history["run_index"].nunique() > 1:
         from impactval.history import row_key
         from impactval.reports.plots import trend_plot

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from impactval import sweep as sw
@@ -96,9 +97,12 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
             if c["found"]:
                 out.append(f"- **Cheapest under {_pct(c['under'])} %**: {_setting(c)}: {_ms(c['cost_s'])} ms "
                            f"of stepping, largest error {_pct(c['score'])} %.")
-            else:
+            elif math.isfinite(c["best_score"]):
                 out.append(f"- **Under {_pct(c['under'])} %: none in this grid** (best reached "
                            f"{_pct(c['best_score'])} % with {_setting(c)}).")
+            else:
+                out.append(f"- **Under {_pct(c['under'])} %: none in this grid** (no cell has a result: see the "
+                           f"cells' status and message).")
         o = orders[(orders["scene"] == scene) & (orders["engine"] == engine)]
         for integ, og in o.groupby("integrator", sort=False):
             out.append(f"- **Order in dt**, {integ}: {_orders_sentence(og, why)}")
@@ -207,7 +211,12 @@ def _stability_summary(s: pd.DataFrame) -> str:
     rest = s[s["dt_limit_observed"].isna()]
     if len(rest):
         top = rest["dt_stable_max"].max()
-        pred = rest["dt_limit_predicted"]
+        raw = pd.to_numeric(rest["dt_limit_predicted"], errors="coerce")
+        pred = raw.where(np.isfinite(raw))          # inf: an implicit integrator, no explicit limit
+        if not math.isfinite(top):
+            bits.append(f"{'the others' if bits else 'every series'}: no cell has a result (skipped or failed: see "
+                        f"the cells' status and message)")
+            return "; ".join(bits) + "."
         phrase = f"{'the others' if bits else 'every series'} stable at every step tried (up to {_g(top)} s)"
         if pred.notna().any():
             low = rest[pred < rest["dt_stable_max"]]
@@ -217,6 +226,8 @@ def _stability_summary(s: pd.DataFrame) -> str:
             if len(low):
                 phrase += (" (" + ", ".join(_series_name(r) for _, r in low.iterrows()) +
                            " ran stably above its predicted limit: conservative there)")
+        elif (raw == math.inf).any():
+            phrase += "; no explicit stability limit (implicit integrator)"
         else:
             phrase += "; no predicted limits"
         bits.append(phrase)
@@ -225,7 +236,9 @@ def _stability_summary(s: pd.DataFrame) -> str:
 
 def _stability_sentence(r) -> str:
     obs, ok, pred = r["dt_limit_observed"], r["dt_stable_max"], r["dt_limit_predicted"]
-    pred_s = f"predicted limit {_g(pred)} s" if math.isfinite(pred) else "no predicted limit from the engine model"
+    pred_s = (f"predicted limit {_g(pred)} s" if math.isfinite(pred) else
+              "no explicit stability limit (implicit integrator)" if pred == math.inf else
+              "no predicted limit from the engine model")
     if math.isfinite(obs):
         lo = f"stable at {_g(ok)} s, " if math.isfinite(ok) else ""
         agree = ""
@@ -339,7 +352,8 @@ def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) 
         ax.set_yscale("log")
         _log_axes(ax, "cost: stepping wall time [s]", "largest |error| [%]")
         ax.set_title(f"{scene}: error vs cost (front circled)", fontsize=10)
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
+        if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
     fig.tight_layout()
     paths = _save(fig, Path(stem))
     plt.close(fig)
@@ -401,7 +415,8 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
         ax.set_yscale("log")
         _log_axes(ax, "time step dt [s]", "|error| [%]")
         ax.set_title(f"{scene} / {engine}", fontsize=10, color=colour)
-        ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
+        if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none
+            ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.08, 1.0), frameon=False)
     for ax in list(axes.flat)[len(pairs):]:
         ax.set_visible(False)
     fig.tight_layout()

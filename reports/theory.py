@@ -90,7 +90,12 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
 
 
 def _pct(x: float) -> str:
-    return f"{100 * x:+.3f} %"
+    return f"{100 * x:+.3f} %" if math.isfinite(x) else "n/a"
+
+
+def _num(x: float, scale: float = 1.0) -> str:
+    """A metric in the table's unit, or n/a where the model gives no answer (a first-order shift <= -100 %)."""
+    return f"{x * scale:.6g}" if math.isfinite(x) else "n/a"
 
 
 def plot_forces(cmp: TheoryComparison, path: Path) -> Path:
@@ -134,7 +139,7 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
               "| model | t_m [us] | f_m [N] | delta_m [um] | t_m vs ref. | f_m vs ref. | delta_m vs ref. |",
               "|---|---:|---:|---:|---:|---:|---:|"]
     for _, r in t.iterrows():
-        lines.append(f"| {r['description']} | {r['t_m_s'] * 1e6:.6g} | {r['f_m_N']:.6g} | {r['delta_m_m'] * 1e6:.6g} | "
+        lines.append(f"| {r['description']} | {_num(r['t_m_s'], 1e6)} | {_num(r['f_m_N'])} | {_num(r['delta_m_m'], 1e6)} | "
                      f"{_pct(r['rel_t_m'])} | {_pct(r['rel_f_m'])} | {_pct(r['rel_delta_m'])} |")
     lines.append("")
     if plot_name:
