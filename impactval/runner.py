@@ -280,9 +280,13 @@ def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, flo
         if worst:
             est = ("its model's own estimate" if any(math.isfinite(v) for v in structure.values())
                    else f"its model error {100 * me:.2f} %" if math.isfinite(me) else "a model error of 0 (none reported)")
+            cause = (f"the time step (dt = {_num(res.dt):.3g} s), the integrator or the engine; try a smaller --dt"
+                     if signed else
+                     f"the structure model under this spring (its estimate is measured with Hertz contact: a coarse "
+                     f"or capped model can be further off under a linear spring, see a sizing note), the time step "
+                     f"(dt = {_num(res.dt):.3g} s), the integrator or the engine; try more segments or a smaller --dt")
             notes.append(f"error against {against} beyond {est} by more than {100 * UNEXPLAINED_ERROR:g} % "
-                         f"({', '.join(worst)}): the time "
-                         f"step (dt = {_num(res.dt):.3g} s), the integrator or the engine; try a smaller --dt")
+                         f"({', '.join(worst)}): {cause}")
     return list(dict.fromkeys(n for n in notes if n))
 
 
