@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import impactval
+from unseen_rows import rows_at_defaults
 from impactval.compare import relative_errors
 from impactval.engines.base import EngineSettings, execute_job
 
@@ -117,17 +118,9 @@ def test_every_unseen2_row_is_ok_or_honest(engine):
     """All defaults, injected Hertz: every row ok or skipped with its reason, and every ok row within the bar,
     or within its own model error + 0.5 %, or carrying a note that says why (the red-team rule)."""
     pytest.importorskip(engine)
-    from impactval.runner import make_row
-
-    for path in SCENES:
-        scene = impactval.load_scene(str(path))
-        res = execute_job(engine, scene, EngineSettings())
-        if res.status == "skipped":
-            assert f"target kind '{scene.target.kind}'" in res.message
+    for path, scene, res, row in rows_at_defaults(engine, SCENES):
+        if row is None:
             continue
-        assert res.status == "ok", (path.name, res.message)
-        ref = impactval.solve(scene, tol=1e-6)
-        row = make_row("run", scene, engine, EngineSettings(), res, ref, None)
         worst = max(abs(row[f"err_{m}"]) for m in ("t_m", "f_m", "delta_m"))
         bar = BAR_EXUDYN if engine == "exudyn" else BAR
         explained = math.isfinite(res.model_error) and worst <= abs(res.model_error) + 5e-3
