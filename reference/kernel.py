@@ -172,17 +172,11 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
                     Kr[j, l, i] = kr
                     Ki[j, l, i] = ki
                     acc += ki
-            elif series:             # the finer levels: every mode resolved
+            else:                    # one branch for the level: the series (finer levels) or the recurrence
+                br, bi = (sr, si) if series else (ur, ui)
                 for i in range(n):
-                    kr = w[i] * sr[l, i]
-                    ki = w[i] * si[l, i]
-                    Kr[j, l, i] = kr
-                    Ki[j, l, i] = ki
-                    acc += ki
-            else:
-                for i in range(n):
-                    kr = w[i] * ur[l, i]
-                    ki = w[i] * ui[l, i]
+                    kr = w[i] * br[l, i]
+                    ki = w[i] * bi[l, i]
                     Kr[j, l, i] = kr
                     Ki[j, l, i] = ki
                     acc += ki
