@@ -656,6 +656,18 @@ def peak(ts: np.ndarray, ds: np.ndarray, lo: float, hi: float):
 
 
 @njit(cache=True)
+def _peak_near(ts: np.ndarray, ds: np.ndarray, k: int, lo: int, hi: int, need: int) -> float:
+    """The larger of ds[k] (the largest sample) and the maximum of the interpolant through samples lo..hi-1
+    between k's neighbours, when there are at least `need` samples."""
+    dmax = ds[k]
+    if hi - lo >= need:
+        _, v = peak(ts[lo:hi], ds[lo:hi], ts[max(k - 1, lo)], ts[min(k + 1, hi - 1)])
+        if v > dmax:
+            dmax = v
+    return dmax
+
+
+@njit(cache=True)
 def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, f: np.ndarray, R: float) -> np.ndarray:
     """Contact phases from a run: rows (t_start, t_end, delta_max) [s, s, m]; t_end = NaN if the
     window ended in contact. Start: linear interpolation over the H/2^J step in which free flight
@@ -698,14 +710,7 @@ def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, f: np.ndarray, R: 
                     pk = q
             lo = max(pk - 3, s + 1)
             hi = min(pk + 4, e)
-            dmax = d[pk]
-            if hi - lo >= 3:
-                a = max(pk - 1, lo)
-                b = min(pk + 1, hi - 1)
-                _, v = peak(t[lo:hi], d[lo:hi], t[a], t[b])
-                if v > dmax:
-                    dmax = v
-            out[row, 2] = dmax
+            out[row, 2] = _peak_near(t, d, pk, lo, hi, 3)
     return out
 
 
@@ -852,16 +857,7 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
     for k in range(ns):
         if ds[k] > ds[best]:
             best = k
-    dmax = ds[best]
-    lo = max(best - 3, 0)
-    hi = min(best + 4, ns)
-    if hi - lo >= 4:
-        a = max(best - 1, lo)
-        b = min(best + 1, hi - 1)
-        _, v = peak(ts[lo:hi], ds[lo:hi], ts[a], ts[b])
-        if v > dmax:
-            dmax = v
-    return dmax
+    return _peak_near(ts, ds, best, max(best - 3, 0), min(best + 4, ns), 4)
 
 
 @njit(cache=True)
