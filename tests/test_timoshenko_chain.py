@@ -62,6 +62,18 @@ def test_chain_static_flexibility_is_timoshenkos(support):
     assert abs(flexibility(hencky_chain(beam, 81)) / exact - 1.0) > 0.02
 
 
+def _frequencies_are_the_chains(engine: np.ndarray, scene, sizing, k: int, rtol: float) -> None:
+    """The engine's frequencies [rad/s] of its built chain: the first k are the linear Timoshenko chain's (engines.chain,
+    at the sized N) within rtol, and the deflection modes that matter are within the sizing's frequency error (+ rtol) of
+    Timoshenko theory (reference/timoshenko.py)."""
+    lin = hencky_chain(scene.target, sizing.n, shear=True).frequencies()
+    k = min(k, len(engine), len(lin))
+    assert np.allclose(engine[:k], lin[:k], rtol=rtol), (engine[:k], lin[:k])
+    ref = timoshenko_frequencies(scene.target, max(sizing.modes_that_matter, 1))
+    near = engine[np.argmin(np.abs(engine[None, :] - ref[:, None]), axis=1)]
+    assert np.max(np.abs(near / ref - 1.0)) <= sizing.frequency_error + rtol
+
+
 @pytest.mark.parametrize("support", sorted(SCENES))
 def test_mujoco_linearisation_is_the_chain_and_within_its_frequency_error(support):
     """MuJoCo's own linearisation (mjd_transitionFD) of the built model has the linear chain's frequencies
@@ -77,13 +89,7 @@ def test_mujoco_linearisation_is_the_chain_and_within_its_frequency_error(suppor
                           shear=True)
     assert sizing.n == n
     mj = MujocoAdapter().structure_frequencies(scene, EngineSettings(segments=n))
-    lin = hencky_chain(scene.target, n, shear=True).frequencies()
-    k = min(6, len(mj))
-    assert np.allclose(mj[:k], lin[:k], rtol=5e-4), (mj[:k], lin[:k])
-    count = max(sizing.modes_that_matter, 1)
-    ref = timoshenko_frequencies(scene.target, count)
-    near = mj[np.argmin(np.abs(mj[None, :] - ref[:, None]), axis=1)]
-    assert np.max(np.abs(near / ref - 1.0)) <= sizing.frequency_error + 5e-4
+    _frequencies_are_the_chains(mj, scene, sizing, 6, 5e-4)
 
 
 def test_euler_bernoulli_scenes_build_the_unchanged_chain():
@@ -153,13 +159,7 @@ def test_pybullet_linearisation_is_the_chain(support):
     assert sizing.n == n and n <= cap
     pb = PybulletAdapter().structure_frequencies(scene, EngineSettings(segments=n))
     pb = pb[pb > 1e-6 * pb.max()]           # the constrained null space keeps no rigid modes, but be safe
-    lin = hencky_chain(scene.target, n, shear=True).frequencies()
-    k = min(8, len(lin))
-    assert np.allclose(pb[:k], lin[:k], rtol=1e-6), (pb[:k], lin[:k])
-    count = max(sizing.modes_that_matter, 1)
-    ref = timoshenko_frequencies(scene.target, count)
-    near = pb[np.argmin(np.abs(pb[None, :] - ref[:, None]), axis=1)]
-    assert np.max(np.abs(near / ref - 1.0)) <= sizing.frequency_error + 1e-6
+    _frequencies_are_the_chains(pb, scene, sizing, 8, 1e-6)
 
 
 def test_pybullet_euler_bernoulli_scenes_build_the_unchanged_chain():
