@@ -1079,10 +1079,12 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         # the window once, at the chosen step (the same tables, so the first contact is the same run's)
         Er, Ei, Kr, Ki, S = moments(omega, g, 4.0 * H, J + 2, p)
         max_nodes = int(6 * n + 60 * J + 50 + 3 * min(series_samples, 1e6) + min(2.5 * window / H, 1e6))
+        pk = np.zeros(2 * ew.shape[0] + 1)      # the modes next to the first contact's largest node (dense_peak)
         while True:
             max_nodes = min(max_nodes, node_cap)
             st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, grading * t_plate, window,
-                                                Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / series_samples)
+                                                Er, Ei, Kr, Ki, S, max_nodes, 2, omega, window / series_samples,
+                                                peak_state=pk)
             if st == STATUS_OK or max_nodes >= node_cap:
                 break
             max_nodes *= 4
@@ -1093,7 +1095,7 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         fine = contacts(t, d, fl, f, R)
         end = _first_end(fl)
         if end > 2:         # the first contact's peak as in the estimate (the same run up to there)
-            fine[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p)
+            fine[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, 2, H, R, alpha, m0, p, pk)
     # the first contact's end node (ball velocity there = rebound) and the largest energy drift
     end = 0
     for k in range(cnt):
