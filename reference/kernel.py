@@ -25,6 +25,8 @@ bracketed by rejecting and halving steps down to H / 2^J.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -210,31 +212,85 @@ def _lagrange_coeffs(sig: np.ndarray, m: int, L: np.ndarray, P: np.ndarray) -> N
             L[k, l - 1] = b / dp
 
 
+#: slots of the stencil cache `run` keeps (direct-mapped; see `stencil_cache`)
+STENCIL_SLOTS = 64
+
+
 @njit(cache=True)
-def _solve_contact(D: float, B: float, alpha: float) -> float:
-    """Root delta > 0 of delta + B alpha delta^1.5 = D (D > 0); Newton from above (convex, monotone)."""
-    d = D
-    if B * alpha > 0.0:
-        d2 = np.cbrt(D / (B * alpha))
-        d2 *= d2                       # (D / (B alpha))^(2/3)
-        if d2 < d:
-            d = d2
+def stencil_cache(p: int) -> np.ndarray:
+    """An empty cache of force stencils for `run` (degree p): [slot, k, l] (k, l <= p) the Lagrange coefficients
+    L[k, l] of one stencil, [slot, p + 1, 0] its key (-1: empty). A stencil's nodes sit at exact multiples of the
+    new step (sizes H / 2^j), so its coefficients depend only on its pattern of step levels (`_stencil_key`):
+    one cache serves every run of a solve (the fine, coarse and coarsest runs repeat the same patterns at touch and
+    separation, where the graded steps change size), and the key is an integer, so roundoff in the node times
+    cannot defeat a lookup."""
+    c = np.empty((STENCIL_SLOTS, p + 2, p + 1))
+    for q in range(STENCIL_SLOTS):
+        c[q, p + 1, 0] = -1.0
+    return c
+
+
+@njit(cache=True)
+def _stencil_key(m: int, j: int, glev: np.ndarray) -> int:
+    """The integer key of a stencil of m known nodes and the new one: m and the levels glev[0..m-2] (newest first) of
+    the steps between the known nodes relative to the new step's level j (6 bits each: levels <= 31)."""
+    key = m
+    for i in range(m - 1):
+        key = key * 64 + (glev[i] - j + 32)
+    return key
+
+
+@njit(cache=True)
+def _stencil_sig(sig: np.ndarray, m: int, j: int, glev: np.ndarray) -> None:
+    """sig[0..m]: the stencil's node positions in units of the new step (level j): the new node at 1, the last known
+    node at 0, the earlier ones back by the steps of levels glev[0], glev[1], ... (newest first). Exact: every gap
+    is a power of two times the new step."""
+    sig[m] = 1.0
+    if m > 0:
+        sig[m - 1] = 0.0
+    for i in range(1, m):
+        sig[m - 1 - i] = sig[m - i] - math.ldexp(1.0, j - glev[i - 1])
+
+
+@njit(cache=True)
+def _contact_root(D: float, B: float, alpha: float):
+    """(delta, sqrt(delta)): the root delta > 0 of delta + B alpha delta^1.5 = D (D > 0) and its square root.
+
+    Newton on s = sqrt(delta), s^2 (1 + c s) = D (c = B alpha): no root per iteration (one division). Start: with
+    e = c sqrt(D) <= 0.01 (the structure-dominated contact: e ~ 1e-5 .. 2e-3 on the worked beam) the series
+    sqrt(D) (1 - e/2 + 5 e^2/8), off by ~e^3, so one step is usually the last; else the smaller of the upper bounds
+    sqrt(D) and (D/c)^(1/3), from which Newton descends monotonically (s^2 (1 + c s) - D is convex and increasing).
+    The error after a step s_k is <= s_k^2 / s (the convexity bound), so the loop stops once the step is <= 1e-8 s,
+    or when the steps stop shrinking (roundoff). A last Newton step on delta itself removes the rounding of s^2:
+    delta and sqrt(delta) within ~2.2e-16 (relative) of the exact root (tests/test_solver_speed_invariance.py)."""
+    c = B * alpha
+    s = np.sqrt(D)
+    e = c * s
+    if e <= 0.01:
+        s *= 1.0 - e * (0.5 - 0.625 * e)
+    elif e > 1.0:
+        s2 = np.cbrt(D / c)
+        if s2 < s:
+            s = s2
     prev = np.inf
     for _ in range(100):
-        sq = np.sqrt(d)
-        F = d + B * alpha * d * sq - D
-        dF = 1.0 + 1.5 * B * alpha * sq
-        step = F / dF
-        d -= step
-        if d <= 0.0:
-            d = 1e-300
-        # quadratic convergence: the error after a step s is <= (F''/2F') s^2 <= s^2 / (4 d) (F''/2F' d =
-        # 0.375 c sqrt(d) / (1 + 1.5 c sqrt(d)) < 1/4, c = B alpha), so once s <= 2e-8 d the new d is exact to
-        # 1e-16 (relative) and the step that would confirm it is skipped; also stop when the step stops shrinking
-        if abs(step) <= 2e-8 * d or abs(step) >= 0.5 * prev:
+        cs = c * s
+        step = (s * s * (1.0 + cs) - D) / (s * (2.0 + 3.0 * cs))
+        s -= step
+        if s <= 0.0:
+            s = 1e-300
+        if abs(step) <= 1e-8 * s or abs(step) >= 0.5 * prev:
             break
         prev = abs(step)
-    return d
+    d = s * s
+    d += (D - d - c * d * s) / (1.0 + 1.5 * c * s)
+    return d, s
+
+
+@njit(cache=True)
+def _solve_contact(D: float, B: float, alpha: float) -> float:
+    """Root delta > 0 of delta + B alpha delta^1.5 = D (D > 0): `_contact_root`'s delta."""
+    return _contact_root(D, B, alpha)[0]
 
 
 @njit(cache=True, fastmath=True, error_model="numpy", inline="always")
@@ -293,7 +349,7 @@ def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m):
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes, j0=0, omega=None,
-        sample_dt=0.0, energy=True, peak_state=None):
+        sample_dt=0.0, energy=True, peak_state=None, stencils=None):
     """Integrate from first touch (t = 0, delta = 0, delta' = v0) to the end of the first contact,
     and on for `window` [s] after it when window > 0 (re-contacts included). Step size H/2^j uses
     table level j + j0 (so one table set serves base steps H and H/2).
@@ -310,6 +366,10 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     `peak_state` (float array of 2 n + 1, optional) receives the modes' state at the node BEFORE the first contact's
     largest delta node (real parts, imaginary parts, then that largest node's index), so that `dense_peak` can
     start there instead of sweeping every mode from touch again.
+
+    `stencils` (from `stencil_cache(p)`, optional): the cache of the force stencils' Lagrange coefficients, shared by
+    the runs of one solve; each run makes its own when None. The stencil is computed from its step levels (exact
+    node positions in units of the step), so the coefficients do not carry the roundoff of the node times.
 
     Returns (status, n_nodes, t, delta, f, x1, u, energy, flags); flags[k] = 1 where a contact
     starts at node k, 2 where one has ended (first node with delta <= 0).
@@ -329,9 +389,14 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     ea = np.empty(max_nodes)
     flags = np.zeros(max_nodes, dtype=np.int8)
     sig = np.empty(p + 1)
-    sig_prev = np.full(p + 1, np.nan)
-    L = np.empty((p + 1, p + 1))
     Pw = np.empty(p + 2)
+    glev = np.zeros(max(p, 1), dtype=np.int64)    # levels of the last accepted steps, the newest first
+    # a stencil is keyed by its step levels (6 bits each, relative to the new step's): up to degree 10, 31 levels
+    keyed = p <= 10 and J + 1 <= 32
+    if stencils is None:
+        cache = stencil_cache(p)
+    else:
+        cache = stencils
     a_known = np.empty(p + 1)
     c = np.empty(p + 1)
     coef = np.zeros(p + 1)            # the step's force polynomial, new node included
@@ -344,7 +409,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         inv2[l] = 1.0 / ((l + 1) * (l + 2))
     cu = 0.0
     cx = 0.0
-    m_prev = -1
 
     t = 0.0
     x1 = 0.0
@@ -366,9 +430,12 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     etas = np.empty(J + 1)
     inv_etas = np.empty(J + 1)
     thr = np.empty(J + 1)
+    etas[0] = H
+    inv_etas[0] = 1.0 / H
+    for q in range(1, J + 1):                     # exact halvings: H / 2^q and 2^q / H
+        etas[q] = etas[q - 1] * 0.5
+        inv_etas[q] = inv_etas[q - 1] * 2.0
     for q in range(J + 1):
-        etas[q] = H / 2.0**q
-        inv_etas[q] = 2.0**q / H
         thr[q] = T_w * 2.0 ** (-q / gam)
     inv_m0 = 1.0 / m0
     while True:
@@ -421,7 +488,6 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 ea[count] = 0.5 * m0 * u * u + 0.5 * emod
                 seg_start = count             # the force stencil restarts here (f = 0 before)
                 free_jt = -1                  # y moved
-                m_prev = -1
                 j_prev = 0
                 count += 1
                 if t >= t_end * (1 - 1e-12):
@@ -461,29 +527,28 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             if first < seg_start:
                 first = seg_start
             m = count - first
-            for k in range(m):
-                sig[k] = (ta[first + k] - t) * inv_etas[j]
-            sig[m] = 1.0
-            same = m == m_prev
-            if same:
-                for k in range(m + 1):
-                    if sig[k] != sig_prev[k]:
-                        same = False
-                        break
-            if not same:
-                _lagrange_coeffs(sig, m, L, Pw)
-                for k in range(m + 1):
-                    sig_prev[k] = sig[k]
-                m_prev = m
+            # the stencil's Lagrange coefficients: from the cache when its pattern of step levels was seen before
+            if keyed:
+                key = _stencil_key(m, j, glev)
+                slot = ((key * 2654435761) >> 16) & (STENCIL_SLOTS - 1)
+                if cache[slot, p + 1, 0] != key:
+                    _stencil_sig(sig, m, j, glev)
+                    _lagrange_coeffs(sig, m, cache[slot], Pw)
+                    cache[slot, p + 1, 0] = key
+            else:
+                slot = 0
+                _stencil_sig(sig, m, j, glev)
+                _lagrange_coeffs(sig, m, cache[slot], Pw)
+                cache[slot, p + 1, 0] = -1.0
             for l in range(p + 1):
                 a_known[l] = 0.0
                 c[l] = 0.0
             for l in range(m + 1):
                 acc_l = 0.0
                 for k in range(m):
-                    acc_l += L[k, l] * fa[first + k]
+                    acc_l += cache[slot, k, l] * fa[first + k]
                 a_known[l] = acc_l
-                c[l] = L[m, l]
+                c[l] = cache[slot, m, l]
             # the structure displacement the known part of the force would give: sum_i Im(E_i y_i) plus
             # sum_l a_l S[jt, l] (S = the tables summed over modes); the first sum comes with the last accepted
             # step's sweep when the step size repeats, else from one short sweep here. The modes themselves are
@@ -513,9 +578,10 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             if D <= 0.0:
                 d_new = D
                 f_new = 0.0
+                sq_new = 0.0
             else:
-                d_new = _solve_contact(D, B, alpha)
-                f_new = alpha * d_new * np.sqrt(d_new)
+                d_new, sq_new = _contact_root(D, B, alpha)
+                f_new = alpha * d_new * sq_new
             if j < J and ((in_contact and d_new <= 0.0) or ((not in_contact) and d_new > 0.0)):
                 j += 1          # the step crosses a contact change: retry with half the step
                 continue
@@ -550,9 +616,12 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         ua[count] = u
         hertz = 0.0
         if delta > 0.0:
-            hertz = 0.4 * alpha * delta * delta * np.sqrt(delta)
+            hertz = 0.4 * alpha * delta * delta * sq_new
         ea[count] = 0.5 * m0 * u * u + hertz + 0.5 * emod + 0.5 * R * f * f
         j_prev = j
+        for q in range(glev.shape[0] - 1, 0, -1):
+            glev[q] = glev[q - 1]
+        glev[0] = j
         if in_contact and delta <= 0.0:
             in_contact = False
             first_open = False
@@ -560,13 +629,11 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             if t_end < 0.0 and window > 0.0:
                 t_end = t + window
             seg_start = count
-            m_prev = -1
         elif (not in_contact) and delta > 0.0:
             in_contact = True
             flags[count - 1] = 1
             seg_start = count - 1
             j_prev = J
-            m_prev = -1
         count += 1
         if t_end > 0.0:
             if t >= t_end * (1 - 1e-12):
@@ -805,20 +872,28 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
     ns = 1
     x1 = x[k_lo]
     u1 = u[k_lo]
+    glev = np.zeros(max(p, 1), dtype=np.int64)     # levels of the steps ending at nodes start - 1, start - 2, ...
+    for i in range(glev.shape[0]):
+        q = start - 1 - i
+        if q >= 1:
+            glev[i] = _level(t[q] - t[q - 1], H)
     for k in range(start, k_hi + 1):
         eta = t[k] - t[k - 1]
+        lev = _level(eta, H)
         first = max(k - p, 0)
         m = k - first
-        for q in range(m + 1):
-            sig[q] = (t[first + q] - t[k - 1]) / eta
+        _stencil_sig(sig, m, lev, glev)            # the run's own stencil (exact node positions, as in `run`)
         _lagrange_coeffs(sig, m, L, Pw)
+        for q in range(glev.shape[0] - 1, 0, -1):
+            glev[q] = glev[q - 1]
+        glev[0] = lev
         for l in range(p + 1):
             acc = 0.0
             if l <= m:
                 for q in range(m + 1):
                     acc += L[q, l] * f[first + q]
             coef[l] = acc
-        jt = j0 + int(np.round(np.log2(H / eta)))
+        jt = j0 + lev
         if k <= k_lo:
             if p == 5:
                 _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, None)
@@ -861,6 +936,12 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
 
 
 @njit(cache=True)
+def _level(eta: float, H: float) -> int:
+    """The level j of a step eta = H / 2^j of a run (from its node times)."""
+    return int(np.round(np.log2(H / eta)))
+
+
+@njit(cache=True)
 def _first_end(fl: np.ndarray) -> int:
     """Index of the node ending the first contact (flag 2), 0 if none."""
     for k in range(fl.shape[0]):
@@ -882,12 +963,14 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
     pk_cc = np.zeros(2 * nm + 1)
     pk_c = np.zeros(2 * nm + 1)
     pk = np.zeros(2 * nm + 1)
+    stencils = stencil_cache(p)          # the three runs repeat their stencils' step patterns
     st_cc, cnt_cc, tcc, dcc, fcc, xcc, ucc, ecc, flcc = run(ew, m0, alpha, v0, R, 4.0 * H, J, p, T_w, 0.0,
-                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, None, pk_cc)
+                                                            Er, Ei, Kr, Ki, S, max_nodes, 0, None, 0.0, None, pk_cc,
+                                                            stencils)
     st_c, cnt_c, tc, dc, fc, xc, uc, ec, flc = run(ew, m0, alpha, v0, R, 2.0 * H, J, p, T_w, 0.0,
-                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, None, pk_c)
+                                                   Er, Ei, Kr, Ki, S, max_nodes, 1, None, 0.0, None, pk_c, stencils)
     st, cnt, t, d, f, x, u, e, fl = run(ew, m0, alpha, v0, R, H, J, p, T_w, 0.0, Er, Ei, Kr, Ki, S, max_nodes, 2,
-                                        peak_state=pk)
+                                        peak_state=pk, stencils=stencils)
     if st != STATUS_OK or st_c != STATUS_OK or st_cc != STATUS_OK:
         z = np.zeros((0, 3))
         return STATUS_OUT_OF_NODES, 0, t, d, f, x, u, e, fl, z, z, z

@@ -189,29 +189,106 @@ def test_validity_of_a_mutable_scene_is_not_kept():
 
 
 def test_contact_equation_root_is_exact_to_roundoff():
-    """kernel._solve_contact (Newton that skips the confirming step once the step is <= 2e-8 of the root) against
-    the root of delta + c delta^1.5 = D in 50-digit decimal arithmetic (bisection, independent of the kernel),
-    over c = B alpha spanning the structure-dominated (c sqrt(D) << 1) to the contact-dominated (>> 1) regime."""
+    """kernel._contact_root (Newton on sqrt(delta) from a series start, a last Newton step on delta) against the root
+    of delta + c delta^1.5 = D and its square root in 50-digit decimal arithmetic (bisection, independent of the
+    kernel), over c = B alpha spanning the structure-dominated (c sqrt(D) << 1, the series start up to 0.01) to the
+    contact-dominated (>> 1) regime, plus 300 random pairs; `_solve_contact` returns the same delta."""
     from decimal import Decimal, getcontext
 
     getcontext().prec = 50
-    worst = 0.0
-    for D in (1e-12, 3e-9, 1e-6, 2e-5, 1e-3):
-        for c_sqrtD in (1e-8, 1e-3, 0.1, 1.0, 7.0, 1e3, 1e8):
-            c = c_sqrtD / math.sqrt(D)
-            B, alpha = c / 1e10, 1e10
-            got = kernel._solve_contact(D, B, alpha)
-            Dd, cd = Decimal(D), Decimal(B) * Decimal(alpha)
-            lo, hi = Decimal(0), Dd
-            for _ in range(200):
-                mid = (lo + hi) / 2
-                if mid + cd * mid * mid.sqrt() > Dd:
-                    hi = mid
-                else:
-                    lo = mid
-            exact = float((lo + hi) / 2)
-            worst = max(worst, abs(got - exact) / exact)
-    assert worst <= 4.5e-16, worst
+    rng = np.random.default_rng(7)
+    pairs = [(D, e) for D in (1e-12, 3e-9, 1e-6, 2e-5, 1e-3)
+             for e in (1e-8, 1e-5, 1e-3, 0.0099, 0.01, 0.0101, 0.1, 1.0, 1.01, 7.0, 1e3, 1e8)]
+    pairs += [(10.0 ** rng.uniform(-13, -2), 10.0 ** rng.uniform(-9, 9)) for _ in range(300)]
+    worst_d = worst_s = 0.0
+    for D, c_sqrtD in pairs:
+        c = c_sqrtD / math.sqrt(D)
+        B, alpha = c / 1e10, 1e10
+        got, root = kernel._contact_root(D, B, alpha)
+        assert kernel._solve_contact(D, B, alpha) == got
+        Dd, cd = Decimal(D), Decimal(B) * Decimal(alpha)
+        lo, hi = Decimal(0), Dd
+        for _ in range(200):
+            mid = (lo + hi) / 2
+            if mid + cd * mid * mid.sqrt() > Dd:
+                hi = mid
+            else:
+                lo = mid
+        exact = (lo + hi) / 2
+        worst_d = max(worst_d, abs(got - float(exact)) / float(exact))
+        worst_s = max(worst_s, abs(root - float(exact.sqrt())) / float(exact.sqrt()))
+    assert worst_d <= 4.5e-16, worst_d
+    assert worst_s <= 4.5e-16, worst_s
+
+
+def _exact_lagrange(sig: list[Fraction]) -> list[list[Fraction]]:
+    """L[k][l]: coefficient of s^l in the Lagrange basis polynomial of node k of sig, in rationals."""
+    m = len(sig) - 1
+    out = []
+    for k in range(m + 1):
+        poly = [Fraction(1)]
+        for q in range(m + 1):
+            if q != k:                               # poly *= (s - sig_q) / (sig_k - sig_q)
+                den = sig[k] - sig[q]
+                nxt = [Fraction(0)] * (len(poly) + 1)
+                for l, a in enumerate(poly):
+                    nxt[l + 1] += a / den
+                    nxt[l] -= a * sig[q] / den
+                poly = nxt
+        out.append(poly)
+    return out
+
+
+def test_stencil_cache_holds_the_exact_lagrange_coefficients_of_the_graded_steps():
+    """run's stencil cache (keyed by the step levels, integers) holds, for the stencils of a graded run (steps H/2^j
+    halving towards touch and separation), the Lagrange coefficients of the node positions in units of the new step,
+    computed here in rationals from the run's own node times (each position rounded to a multiple of 2^-20: the node
+    times carry roundoff, the scheme's positions are exact dyadic numbers). Also: the three runs of solve_triple
+    share one cache, and a run with its own cache gives the node values of one with the shared cache."""
+    scene = impactval.load_scene("beam_ss_midspan")
+    from impactval.reference.solve import _select, structure_modes
+
+    md = structure_modes(scene, 40)
+    omega, g, ew = _select(md)
+    m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+    pl = plate_impact(m0, alpha, v0)
+    H, J, p = pl.t_m / 37.0, 9, P_DEGREE
+    Er, Ei, Kr, Ki, S = kernel.moments(omega, g, 4.0 * H, J + 2, p)
+    cache = kernel.stencil_cache(p)
+    runs = {}
+    for j0, base in ((0, 4.0 * H), (1, 2.0 * H), (2, H)):      # the order solve_triple runs them in
+        out = kernel.run(ew, m0, alpha, v0, md.residual_flexibility, base, J, p, 0.2 * pl.t_m, 0.0, Er, Ei, Kr, Ki,
+                         S, 4000, j0, None, 0.0, None, None, cache)
+        assert out[0] == kernel.STATUS_OK
+        runs[j0] = (base, out)
+    base, out = runs[2]
+    cnt, t = out[1], out[2]
+    own = kernel.run(ew, m0, alpha, v0, md.residual_flexibility, H, J, p, 0.2 * pl.t_m, 0.0, Er, Ei, Kr, Ki, S, 4000,
+                     2, None, 0.0, None)
+    assert own[1] == cnt                       # delta the same to roundoff (another compiled specialisation of run)
+    assert np.max(np.abs(own[3][:cnt] - out[3][:cnt])) <= 1e-14 * np.max(out[3][:cnt])
+    levels = [kernel._level(t[k] - t[k - 1], base) for k in range(1, cnt)]
+    assert sorted(set(levels)) == list(range(J + 1))                       # every level is used
+    checked, keys = 0, set()
+    for k in range(1, cnt):                                                # the step from node k - 1 to node k
+        first = max(k - 1 - p + 1, 0)
+        m = k - first
+        j = levels[k - 1]
+        glev = np.array([levels[k - 2 - i] if k - 2 - i >= 0 else 0 for i in range(p)], dtype=np.int64)
+        key = kernel._stencil_key(m, j, glev)
+        keys.add(key)
+        slot = ((key * 2654435761) >> 16) & (kernel.STENCIL_SLOTS - 1)
+        if cache[slot, p + 1, 0] != key:
+            continue                                                       # evicted by a later pattern
+        eta = t[k] - t[k - 1]
+        sig = [Fraction(round((t[first + q] - t[k - 1]) / eta * 2**20), 2**20) for q in range(m + 1)]
+        exact = _exact_lagrange(sig)
+        scale = max(abs(float(a)) for row in exact for a in row)
+        for q in range(m + 1):
+            for l in range(m + 1):
+                assert abs(cache[slot, q, l] - float(exact[q][l])) <= 1e-14 * scale, (k, q, l)
+        checked += 1
+    assert len(keys) >= 15 and checked >= len(keys) - 3 and cnt - 1 >= 4 * len(keys)   # few patterns, often reused
 
 
 @pytest.mark.parametrize("name", ["beam_ss_midspan", "modal_two_mode", "heavy_ball_slender_beam"])
