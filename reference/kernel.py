@@ -301,11 +301,13 @@ def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
     on the step). Returns (sum_i ew_i |y_i|^2 (twice the modal energy [J]; NaN with ew None: a run whose energy series
     nobody reads, the 2H and 4H runs of an error estimate, where numba prunes the energy sum at compile time),
     sum_i Im(e^{i omega_i eta} y_i) [m] of the new y: the free part of the next step's structure displacement if that
-    step has the same size). Inlined into `run` (a call per step cost ~8 % of a run: the tables' array structures
-    passed each time)."""
+    step has the same size), sum_i Im y_i [m] of the new y: the structure displacement (`dense_peak`'s sub-steps; a
+    caller that ignores it pays nothing, the sweep being inlined). Inlined into `run` (a call per step cost ~8 % of a
+    run: the tables' array structures passed each time)."""
     c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
     emod = 0.0
     nxt = 0.0
+    ysum = 0.0
     for i in range(yr.shape[0]):
         y_r = yr[i]
         y_i = yi[i]
@@ -320,9 +322,10 @@ def _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew):
         if ew is not None:
             emod += ew[i] * (a * a + b * b)
         nxt += er * b + ei * a
+        ysum += b
     if ew is None:
         emod = np.nan
-    return emod, nxt
+    return emod, nxt, ysum
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -598,9 +601,9 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             coef[l] = a_known[l] + c[l] * f_new if l <= m else 0.0
         if p == 5:
             if energy is not None:
-                emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
+                emod, free_acc, _ = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew)
             else:
-                emod, free_acc = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, None)
+                emod, free_acc, _ = _sweep6(Er, Ei, Kr, Ki, jt, coef, yr, yi, None)
         else:
             emod, free_acc = _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m)
         free_jt = jt
@@ -712,9 +715,11 @@ def peak(ts: np.ndarray, ds: np.ndarray, lo: float, hi: float):
     n = c.shape[0]
     d_lo = 0.0
     d_hi = 0.0
+    sign = 1.0                       # (-1)^(l - 1)
     for l in range(1, n):
-        d_lo += l * c[l] * (-1.0) ** (l - 1)
+        d_lo += l * c[l] * sign
         d_hi += l * c[l]
+        sign = -sign
     if d_lo > 0.0 and d_hi < 0.0:
         x = _root(c, -1.0, 1.0, True)
     else:   # no interior stationary point: the larger end
@@ -859,14 +864,22 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
                 pk = k
     k_lo = max(pk - 1, 0)            # the steps on either side of the largest node are refined
     k_hi = min(pk + 1, end)
-    sig = np.empty(p + 1)
-    L = np.empty((p + 1, p + 1))
-    Pw = np.empty(p + 2)
-    coef = np.zeros(p + 1)
-    sub = np.zeros(p + 1)
-    Q = 2 ** DENSE_LEVELS
-    ts = np.empty((k_hi - k_lo) * Q + 1)
-    ds = np.empty((k_hi - k_lo) * Q + 1)
+    q1 = p + 1
+    ns_max = (k_hi - k_lo) * 2 ** DENSE_LEVELS + 1
+    work = np.empty(q1 * q1 + 6 * q1 + 1 + 2 * ns_max)      # one allocation for the small arrays below
+    L = work[:q1 * q1].reshape((q1, q1))
+    o = q1 * q1
+    sig, coef, sub, inv1, inv2 = work[o:o + q1], work[o + q1:o + 2 * q1], work[o + 2 * q1:o + 3 * q1], \
+        work[o + 3 * q1:o + 4 * q1], work[o + 4 * q1:o + 5 * q1]
+    Pw = work[o + 5 * q1:o + 6 * q1 + 1]
+    o += 6 * q1 + 1
+    ts, ds = work[o:o + ns_max], work[o + ns_max:o + 2 * ns_max]
+    for l in range(q1):
+        coef[l] = 0.0
+        sub[l] = 0.0
+        inv1[l] = 1.0 / (l + 1)
+        inv2[l] = 1.0 / ((l + 1) * (l + 2))
+    inv_m0 = 1.0 / m0
     ts[0] = t[k_lo]
     ds[0] = d[k_lo]
     ns = 1
@@ -906,21 +919,19 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
         for q in range(nq):
             _shift(coef, float(q), 1.0 / nq, sub)
             if p == 5:
-                _sweep6(Er, Ei, Kr, Ki, js, sub, yr, yi, None)
+                _, _, x2 = _sweep6(Er, Ei, Kr, Ki, js, sub, yr, yi, None)
             else:
                 _sweep(Er, Ei, Kr, Ki, js, sub, yr, yi, ew, p)
-            x2 = 0.0
-            for i in range(n):
-                x2 += yi[i]
+                x2 = 0.0
+                for i in range(n):
+                    x2 += yi[i]
             wu = 0.0
             wx = 0.0
-            fs = 0.0
             for l in range(p + 1):
-                wu += sub[l] / (l + 1)
-                wx += sub[l] / ((l + 1) * (l + 2))
-                fs += sub[l]
-            x1 = x1 + u1 * es - es * es * wx / m0
-            u1 = u1 - es * wu / m0
+                wu += sub[l] * inv1[l]
+                wx += sub[l] * inv2[l]
+            x1 = x1 + u1 * es - es * es * wx * inv_m0
+            u1 = u1 - es * wu * inv_m0
             gap = x1 - x2
             dv = gap
             if R > 0.0 and gap > 0.0:
@@ -1191,3 +1202,31 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         if dev > drift:
             drift = dev
     return st, cnt, t, d, f, x, u, e, fl, fine, rel, n, end, drift
+
+
+@njit(cache=True)
+def solve_auto_packed(*args):
+    """`solve_auto` (the same arguments) with its series packed for the caller in Python: numba boxes each returned
+    array apart (~0.3 us each), so the six node series plus the structure displacement come back as the rows of one
+    array. Returns (status, n_nodes, series [7, n_nodes]: t [s], delta [m], f [N], x_ball [m], u_ball [m/s],
+    energy [J], x_structure = x_ball - delta [m]; flags, contacts, rel_uncertainty, base step count n, index of the
+    node ending the first contact, largest |E/E0 - 1|), as `solve_auto`. Each row is copied in its own loop, so a
+    long window's series are not all held twice at once (a series is freed after its last use)."""
+    st, cnt, t, d, f, x, u, e, fl, fine, rel, n, end, drift = solve_auto(*args)
+    cnt_out = min(cnt, t.shape[0])
+    series = np.empty((7, cnt_out))
+    for i in range(cnt_out):
+        series[6, i] = x[i] - d[i]
+    for i in range(cnt_out):
+        series[0, i] = t[i]
+    for i in range(cnt_out):
+        series[1, i] = d[i]
+    for i in range(cnt_out):
+        series[2, i] = f[i]
+    for i in range(cnt_out):
+        series[3, i] = x[i]
+    for i in range(cnt_out):
+        series[4, i] = u[i]
+    for i in range(cnt_out):
+        series[5, i] = e[i]
+    return st, cnt, series, fl, fine, rel, n, end, drift

@@ -198,7 +198,7 @@ def solve_modes(modes: Modes, mass: float, alpha: float, v0: float, tol: float =
     In a window, free flight jumps ahead by up to window / series_samples [s] where no contact can occur
     (kernel.run): the series keeps ~series_samples nodes plus every contact's, in bounded memory.
     """
-    t, d, f, x, u, e, table, rel, end, drift = _solve_series(modes, mass, alpha, v0, tol, window, series_samples)
+    t, d, f, x, u, e, table, rel, end, drift, _ = _solve_series(modes, mass, alpha, v0, tol, window, series_samples)
     run = _make_run(alpha, t, d, f, x, u, e, table, end, drift)
     m = run.metrics
     return run, Metrics(rel * m.t_m, rel * m.f_m, rel * m.delta_m)
@@ -208,7 +208,7 @@ def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float
                   series_samples: float = kernel.SERIES_SAMPLES):
     """solve_modes' kernel call and refusals: (t, delta, f, x_ball, u_ball, energy series, contact table rows
     (t_start, t_end, delta_max), relative uncertainty, index of the node ending the first contact, largest
-    |E/E0 - 1|)."""
+    |E/E0 - 1|, x_structure = x_ball - delta series). The series are rows (views) of one array."""
     plate = _plate(mass, alpha, v0)
     omega, g, ew = _select(modes)
     # estimate ~ 4x the real error (ESTIMATE_ORDER): aim the first try at an estimate of tol / 2;
@@ -216,12 +216,13 @@ def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float
     n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
     if window > 0.0:
         check_window(window, plate.t_m, tol)
-    st, cnt, t, d, f, x, u, e, flags, fine, rel, n, end, drift = kernel.solve_auto(
+    st, cnt, series, flags, fine, rel, n, end, drift = kernel.solve_auto_packed(
         omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
         P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, UNRESOLVED_THETA, UNRESOLVED_C, SMALLEST_STEP_FACTOR,
         UNRESOLVED_SHARE, node_cap(len(omega)), float(series_samples), LIGHT_COUPLING, UNRESOLVED_STRONG_S,
         MIN_STEPS)
     if st != kernel.STATUS_OK:
+        t = series[0]
         if window > 0.0 and cnt > 0 and t[cnt - 1] > 0.0:
             _refuse_window(window, float(t[cnt - 1]), int(cnt), len(omega))
         cap = node_cap(len(omega)) // 4
@@ -229,7 +230,8 @@ def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float
             f"the first contact needs more than {cap} steps (it lasts far longer than the rigid-plate "
             f"contact time {plate.t_m:.3g} s): the structure is far softer than the contact (ball mass "
             f"{mass:.3g} kg); refused to stay within memory: use a lighter ball, a stiffer target or a looser tol")
-    return t, d, f, x, u, e, fine, rel, end, drift
+    t, d, f, x, u, e, xs = series
+    return t, d, f, x, u, e, fine, rel, end, drift, xs
 
 
 #: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
@@ -322,10 +324,12 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         m = run.metrics
         t_m, f_m, delta_m = m.t_m, m.f_m, m.delta_m
         t, f, delta, x_ball, energy = run.t, run.f, run.delta, run.x_ball, run.energy
+        x_structure = x_ball - delta
         contacts, rebound, drift, n_steps = run.contacts, run.rebound_velocity, run.energy_error, run.n_steps
     else:       # solve_modes without its Run (the same numbers, fewer objects per call)
         md = _target_modes(scene, fixed)
-        t, delta, f, x_ball, u, energy, table, rel, end, drift = _solve_series(md, mass, alpha, v0, tol, window)
+        t, delta, f, x_ball, u, energy, table, rel, end, drift, x_structure = _solve_series(md, mass, alpha, v0, tol,
+                                                                                            window)
         n_modes = md.n
         contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
         first = contacts[0]
@@ -348,7 +352,7 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     return build(ImpactResult, {
         "scene": scene.name, "source": "reference", "model": model, "t_m": t_m, "f_m": f_m, "delta_m": delta_m,
         "validity": validity, "uncertainty": unc, "modes": n_modes, "t": t, "f": f, "delta": delta,
-        "x_ball": x_ball, "x_structure": x_ball - delta, "energy": energy, "rebound_velocity": rebound,
+        "x_ball": x_ball, "x_structure": x_structure, "energy": energy, "rebound_velocity": rebound,
         "energy_error": drift, "contacts": contacts, "settings": {"tol": tol, "window": window, "p": P_DEGREE},
         "n_steps": n_steps, "wall_time_step_s": time.perf_counter() - t0})
 

@@ -76,7 +76,7 @@ def test_moment_levels_are_the_halved_steps():
 
 def test_fused_sweep_equals_the_generic_sweep():
     """The degree-5 sweep (one pass over the modes) and the generic per-degree sweep give the same new modal state,
-    energy and next free displacement to roundoff."""
+    energy and next free displacement to roundoff (and the degree-5 sweep the new structure displacement)."""
     rng = np.random.default_rng(5)
     n = 37                                   # not a multiple of the vector width
     omega = rng.uniform(1e3, 1e6, n)
@@ -88,7 +88,7 @@ def test_fused_sweep_equals_the_generic_sweep():
         y0r, y0i = rng.normal(size=n) * 1e-6, rng.normal(size=n) * 1e-6
         ar, ai = y0r.copy(), y0i.copy()
         br, bi = y0r.copy(), y0i.copy()
-        e6, nxt6 = kernel._sweep6(Er, Ei, Kr, Ki, jt, coef, ar, ai, ew)
+        e6, nxt6, ysum6 = kernel._sweep6(Er, Ei, Kr, Ki, jt, coef, ar, ai, ew)
         eg, nxtg = kernel._sweep(Er, Ei, Kr, Ki, jt, coef, br, bi, ew, P_DEGREE)
         # independent: complex arithmetic in numpy
         y = (Er[jt] + 1j * Ei[jt]) * (y0r + 1j * y0i) + ((Kr[jt] + 1j * Ki[jt]) * coef[:, None]).sum(axis=0)
@@ -100,6 +100,7 @@ def test_fused_sweep_equals_the_generic_sweep():
         for e_, nxt_ in ((e6, nxt6), (eg, nxtg)):
             assert abs(e_ - e_ref) <= 1e-13 * e_ref
             assert abs(nxt_ - nxt_ref) <= 1e-13 * np.abs(y).sum()
+        assert abs(ysum6 - float(y.imag.sum())) <= 1e-13 * np.abs(y).sum()     # the structure displacement
 
 
 def test_interleaved_solves_repeat_exactly():
