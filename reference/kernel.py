@@ -1209,8 +1209,9 @@ def solve_auto_packed(*args):
     """`solve_auto` (the same arguments) with its series packed for the caller in Python: numba boxes each returned
     array apart (~0.3 us each), so the six node series plus the structure displacement come back as the rows of one
     array. Returns (status, n_nodes, series [7, n_nodes]: t [s], delta [m], f [N], x_ball [m], u_ball [m/s],
-    energy [J], x_structure = x_ball - delta [m]; flags, contacts, rel_uncertainty, base step count n, index of the
-    node ending the first contact, largest |E/E0 - 1|), as `solve_auto`. Each row is copied in its own loop, so a
+    energy [J], x_structure = x_ball - delta [m]; contacts, rel_uncertainty, base step count n, index of the node
+    ending the first contact, largest |E/E0 - 1|), as `solve_auto` (the flags, which the caller does not need, are
+    left out: each boxed array also costs an unpickling of its type, ~0.5 us). Each row is copied in its own loop, so a
     long window's series are not all held twice at once (a series is freed after its last use)."""
     st, cnt, t, d, f, x, u, e, fl, fine, rel, n, end, drift = solve_auto(*args)
     cnt_out = min(cnt, t.shape[0])
@@ -1229,4 +1230,4 @@ def solve_auto_packed(*args):
         series[4, i] = u[i]
     for i in range(cnt_out):
         series[5, i] = e[i]
-    return st, cnt, series, fl, fine, rel, n, end, drift
+    return st, cnt, series, fine, rel, n, end, drift

@@ -216,7 +216,7 @@ def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float
     n0 = max(8.0, _N_ANCHOR * (8.0 * _ERR_ANCHOR / tol) ** (1.0 / (P_DEGREE + 1)))
     if window > 0.0:
         check_window(window, plate.t_m, tol)
-    st, cnt, series, flags, fine, rel, n, end, drift = kernel.solve_auto_packed(
+    st, cnt, series, fine, rel, n, end, drift = kernel.solve_auto_packed(
         omega, g, ew, mass, alpha, v0, modes.residual_flexibility, tol, window, plate.t_m, plate.delta_m,
         P_DEGREE, GRADING_WINDOW, n0, ESTIMATE_ORDER, UNRESOLVED_THETA, UNRESOLVED_C, SMALLEST_STEP_FACTOR,
         UNRESOLVED_SHARE, node_cap(len(omega)), float(series_samples), LIGHT_COUPLING, UNRESOLVED_STRONG_S,
