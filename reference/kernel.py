@@ -86,7 +86,8 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
     theta^2, `_series_coeffs`), then the downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there. Both
     branches run over all modes of a level in loops the compiler vectorises (arguments clamped so that the branch
     not taken stays finite); each mode then takes its own. A level whose modes all take one branch computes only
-    that one (the finer levels of a table set: every |theta| < 2).
+    that one (the finer levels of a table set: every |theta| < 2), and a series-only level stores its entries in the
+    downward recurrence's own pass over the modes.
     """
     n = omega.shape[0]
     Er = np.empty((J + 1, n))
@@ -147,10 +148,33 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
                 si[p, i] *= min(max(theta[i], -2.0), 2.0)
             for l in range(p, 0, -1):
                 il = inv_l[l]
+                if upward:
+                    for i in range(n):
+                        th = min(max(theta[i], -2.0), 2.0)
+                        sr[l - 1, i] = (1.0 - th * si[l, i]) * il     # (1 + i theta K_l) / l
+                        si[l - 1, i] = (th * sr[l, i]) * il
+                else:                # a series-only level (the finer ones): K_l is final, stored in the same pass
+                    acc = 0.0
+                    for i in range(n):
+                        th = min(max(theta[i], -2.0), 2.0)
+                        a = sr[l, i]
+                        b = si[l, i]
+                        sr[l - 1, i] = (1.0 - th * b) * il
+                        si[l - 1, i] = (th * a) * il
+                        ki = w[i] * b
+                        Kr[j, l, i] = w[i] * a
+                        Ki[j, l, i] = ki
+                        acc += ki
+                    S[j, l] = acc
+            if not upward:
+                acc = 0.0
                 for i in range(n):
-                    th = min(max(theta[i], -2.0), 2.0)
-                    sr[l - 1, i] = (1.0 - th * si[l, i]) * il     # (1 + i theta K_l) / l
-                    si[l - 1, i] = (th * sr[l, i]) * il
+                    ki = w[i] * si[0, i]
+                    Kr[j, 0, i] = w[i] * sr[0, i]
+                    Ki[j, 0, i] = ki
+                    acc += ki
+                S[j, 0] = acc
+                continue
         if upward:
             for i in range(n):
                 th = theta[i]
