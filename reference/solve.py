@@ -334,7 +334,6 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
         first = contacts[0]
         t_m, f_m, delta_m = first.t_end - first.t_start, first.f_max, first.delta_max
-        m = Metrics(t_m, f_m, delta_m)
         unc = Metrics(rel * t_m, rel * f_m, rel * delta_m)
         rebound, n_steps = -float(u[end]), len(t) - 1
     if not (math.isfinite(t_m) and math.isfinite(f_m) and math.isfinite(delta_m) and math.isfinite(unc.t_m)
@@ -345,7 +344,7 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
                              f"double precision can carry (check the ball's and target's sizes, masses and "
                              f"frequencies).")
     validity = hertz_validity(scene, f_m, delta_m)
-    rel = _rel(unc, m)
+    rel = max(unc.t_m / t_m, unc.f_m / f_m, unc.delta_m / delta_m)     # _rel(unc, metrics) without a Metrics
     if rel > tol * (1 + 1e-9):
         validity += (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the mode count or step "
                      f"reached its limit",)
