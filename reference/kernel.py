@@ -1014,7 +1014,7 @@ LIGHT_CAP = 0.5
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
                est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25,
-               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0, strong_s=np.inf, min_steps=0.0):
+               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0, class_s=None, min_steps=0.0):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
@@ -1025,13 +1025,16 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     s_w = np.empty(nm)
     sqrt_w = np.empty(nm)
     omega_c = np.empty(nm)
-    row = np.zeros(nm, dtype=np.int64)   # the table row: 0 for s <= strong_s, 1 (strongly coupled) above
+    # the table row of each mode: its coupling class, the number of class bounds class_s below its s (row 0 without)
+    row = np.zeros(nm, dtype=np.int64)
     k_t = 1.5 * alpha * np.sqrt(delta_plate)
     for i in range(nm):
         w = omega[i] * delta_plate / v0
         s_w[i] = m0 * g[i] * omega[i] * max(w, 1.0) ** -3.5     # a mode below the impact frequency: weight s
-        if m0 * g[i] * omega[i] > strong_s and c_tab.shape[0] > 1:
-            row[i] = 1
+        if class_s is not None:
+            for b in range(class_s.shape[0]):
+                if m0 * g[i] * omega[i] > class_s[b] and row[i] < c_tab.shape[0] - 1:
+                    row[i] += 1
         sqrt_w[i] = np.sqrt(w)
         # the frequency a mode rings at while the contact spring (tangent stiffness at the rigid-plate peak)
         # holds it: a light mode (large s) is stiffened far above omega and needs shorter steps
