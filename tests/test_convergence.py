@@ -152,25 +152,32 @@ def test_unresolved_mode_error_table_is_not_loose():
     assert max(_table_excess(130.0, 0.3)) > 0.05
 
 
-def _single_mode_misses(s: float, w: float, tols) -> list[str]:
-    """solve_modes on one mode (s = (m0/m) phi^2, w = omega delta_plate/v0) of the worked ball at each tol against the
-    same mode at tol 1e-12: the comparisons whose real error (largest relative over t_m, f_m, delta_m) is above the
-    reported uncertainty (only where the real error is >= 100x the truth's own uncertainty)."""
+def _cluster_misses(k: int, s: float, w: float, spread: float, tols) -> list[str]:
+    """solve_modes on k modes sharing the coupling s = (m0/m) phi^2 evenly, at w (1 +- spread) (w = omega delta_plate/v0;
+    k = 1: a single mode), on the worked ball, at each tol against the same modes at tol 1e-12: the comparisons whose
+    real error (largest relative over t_m, f_m, delta_m) is above the reported uncertainty (only where the real error
+    is >= 100x the truth's own uncertainty)."""
     from impactval.reference.beams import Modes
 
     m0, alpha, v0 = 0.0327, 1.5384e10, 1.0
     p = plate_impact(m0, alpha, v0)
-    one = Modes(np.array([w * v0 / p.delta_m]), np.array([m0 / s]), np.array([1.0]))
-    truth, truth_unc = solve_modes(one, m0, alpha, v0, 1e-12)
+    ws = w * (1 + spread * np.linspace(-1, 1, k))
+    md = Modes(ws * v0 / p.delta_m, np.full(k, m0 * k / s), np.ones(k))
+    truth, truth_unc = solve_modes(md, m0, alpha, v0, 1e-12)
     tr = truth.metrics
     misses = []
     for tol in tols:
-        run, unc = solve_modes(one, m0, alpha, v0, tol)
+        run, unc = solve_modes(md, m0, alpha, v0, tol)
         m = run.metrics
         real = max(abs(m.t_m / tr.t_m - 1), abs(m.f_m / tr.f_m - 1), abs(m.delta_m / tr.delta_m - 1))
         if real >= 100 * truth_unc.t_m / tr.t_m and real > unc.t_m / m.t_m:
-            misses.append(f"s {s:g}, w {w:g}, tol {tol:.2g}: real {real:.3g} > reported {unc.t_m / m.t_m:.3g}")
+            misses.append(f"k {k}, s {s:g}, w {w:g}, spread {spread:g}, tol {tol:.2g}: real {real:.3g} > "
+                          f"reported {unc.t_m / m.t_m:.3g}")
     return misses
+
+
+def _single_mode_misses(s: float, w: float, tols) -> list[str]:
+    return _cluster_misses(1, s, w, 0.0, tols)
 
 
 @pytest.mark.parametrize("s, w, tol", [(1.0, 15.0, 1e-6), (0.85, 50.0, 1e-8), (0.85, 50.0, 2.2e-8),
@@ -193,28 +200,6 @@ def test_uncertainty_bounds_single_modes_off_the_table_grid_sweep():
         for w in (3.5, 5.5, 7, 11, 14, 17, 22, 27, 35, 50, 70, 100, 150, 230, 350, 700):
             misses += _single_mode_misses(s, w, np.geomspace(1e-10, 1e-3, 22))
     assert not misses, misses
-
-
-def _cluster_misses(k: int, s: float, w: float, spread: float, tols) -> list[str]:
-    """solve_modes on k modes sharing the coupling s evenly, frequencies w (1 +- spread) (the worked ball), against
-    the same modes at tol 1e-12: the comparisons whose real error is above the reported uncertainty."""
-    from impactval.reference.beams import Modes
-
-    m0, alpha, v0 = 0.0327, 1.5384e10, 1.0
-    p = plate_impact(m0, alpha, v0)
-    ws = w * (1 + spread * np.linspace(-1, 1, k))
-    md = Modes(ws * v0 / p.delta_m, np.full(k, m0 * k / s), np.ones(k))
-    truth, truth_unc = solve_modes(md, m0, alpha, v0, 1e-12)
-    tr = truth.metrics
-    misses = []
-    for tol in tols:
-        run, unc = solve_modes(md, m0, alpha, v0, tol)
-        m = run.metrics
-        real = max(abs(m.t_m / tr.t_m - 1), abs(m.f_m / tr.f_m - 1), abs(m.delta_m / tr.delta_m - 1))
-        if real >= 100 * truth_unc.t_m / tr.t_m and real > unc.t_m / m.t_m:
-            misses.append(f"k {k}, s {s:g}, w {w:g}, spread {spread:g}, tol {tol:.2g}: real {real:.3g} > "
-                          f"reported {unc.t_m / m.t_m:.3g}")
-    return misses
 
 
 @pytest.mark.parametrize("k, s, w, spread", [(9, 1.0, 15.0, 0.0), (9, 1.0, 50.0, 0.02), (16, 3.0, 8.0, 0.3),
