@@ -105,8 +105,9 @@ def test_uncertainty_bounds_the_ode_form_on_random_scenes(seed):
 def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds):
     """Random scenes (up to 160 modes, with and without residual flexibility) at tol 1e-4, 1e-6, 1e-8 against the
     same model at tol 1e-12: the real error never exceeds the reported uncertainty (measured with the dense peak: 0 of
-    11,343 comparisons on seeds 0-3999, 2 of 11,364 on seeds 4000-7999, 1.09x and 1.69x, where the estimate before
-    the dense peak had 2 of 11,448, 1.36x and 1.42x; docs/reference.md). The median of reported / real is below 10
+    11,448 comparisons on seeds 0-3999 and 0 of 11,476 on 8000-11999, 2 of 11,454 on seeds 4000-7999, 1.17x and 1.69x
+    (round 6: the re-measured unresolved-mode table and its binned quadrature sum; round 5 had 1.09x and 1.69x there);
+    docs/reference.md). The median of reported / real is below 10
     (6.9 measured)."""
     ratios, misses = [], []
     for seed in seeds:
@@ -174,16 +175,20 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 
 
 #: catalogue and tests' scenes whose reported uncertainty at tol 1e-6 is more than 10x the real error (measured
-#: ratio x 1.5, never above the guard held before; docs/reference.md): automatic-mode beams whose time-step
-#: uncertainty (Richardson before the asymptotic range) or truncation estimate is loose. Asserted honest and not
-#: looser than this.
-TEN_X_MISSES = {"heavy_ball_slender_beam": 18, "al_cantilever_glass": 22, "cantilever_titanium": 23,
-                "heavy_wc_slender": 28, "steel_cc_pmma_ball": 43, "stubby_steel": 15}
+#: ratio x 1.5; docs/reference.md): automatic-mode beams whose time-step uncertainty (Richardson before the asymptotic
+#: range) or truncation estimate is loose. Asserted honest and not looser than this. Round 6 re-measured them with
+#: its unresolved-mode table (denser grid: the old one reported up to 1.87x less than the real error of single modes
+#: off its grid) and the binned quadrature sum of the modes' terms; round 5's guards in brackets: al_cantilever_glass
+#: 11.2 (22), cantilever_titanium 16.7 (23; the ratio moves with the chosen step: 6.9 with the table alone),
+#: heavy_wc_slender 11.2 (28), rand_wc_on_steel_cantilever 13.0 (was within 10x: 9.0), steel_cc_pmma_ball 28.7 (43),
+#: stubby_steel 13.3 (15); heavy_ball_slender_beam 9.0 (18) is now held to 10x.
+TEN_X_MISSES = {"al_cantilever_glass": 17, "cantilever_titanium": 25, "heavy_wc_slender": 17,
+                "rand_wc_on_steel_cantilever": 20, "steel_cc_pmma_ball": 43, "stubby_steel": 20}
 #: tests/unseen scenes measured within 10x at tol 1e-6 (catalogue scenes not in TEN_X_MISSES are held to 10x, and so
 #: are catalogue scenes added later; scenes added to tests/unseen later are checked for honesty only until measured
 #: and listed here or above)
-WITHIN_10X = ("rand_wc_on_steel_cantilever", "cc_aluminium_0p3", "glass_on_pmma", "heavy_wc_slender_timoshenko",
-              "rand_glass_on_pmma_ss", "rand_wc_on_pmma_cc", "stubby_steel_timoshenko", "ti_ss_steel_heavy")
+WITHIN_10X = ("cc_aluminium_0p3", "glass_on_pmma", "heavy_wc_slender_timoshenko", "rand_glass_on_pmma_ss",
+              "rand_wc_on_pmma_cc", "stubby_steel_timoshenko", "ti_ss_steel_heavy")
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]
