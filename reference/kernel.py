@@ -267,6 +267,12 @@ def _stencil_key(m: int, j: int, glev: np.ndarray) -> int:
 
 
 @njit(cache=True)
+def _stencil_slot(key: int) -> int:
+    """The cache slot of a stencil key (multiplicative hash, direct-mapped: a slot holds the last key stored there)."""
+    return ((key * 2654435761) >> 16) & (STENCIL_SLOTS - 1)
+
+
+@njit(cache=True)
 def _stencil_sig(sig: np.ndarray, m: int, j: int, glev: np.ndarray) -> None:
     """sig[0..m]: the stencil's node positions in units of the new step (level j): the new node at 1, the last known
     node at 0, the earlier ones back by the steps of levels glev[0], glev[1], ... (newest first). Exact: every gap
@@ -559,7 +565,7 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
             # the stencil's Lagrange coefficients: from the cache when its pattern of step levels was seen before
             if keyed:
                 key = _stencil_key(m, j, glev)
-                slot = ((key * 2654435761) >> 16) & (STENCIL_SLOTS - 1)
+                slot = _stencil_slot(key)
                 if cache[slot, p + 1, 0] != key:
                     _stencil_sig(sig, m, j, glev)
                     _lagrange_coeffs(sig, m, cache[slot], Pw)

@@ -278,7 +278,7 @@ def test_stencil_cache_holds_the_exact_lagrange_coefficients_of_the_graded_steps
         glev = np.array([levels[k - 2 - i] if k - 2 - i >= 0 else 0 for i in range(p)], dtype=np.int64)
         key = kernel._stencil_key(m, j, glev)
         keys.add(key)
-        slot = ((key * 2654435761) >> 16) & (kernel.STENCIL_SLOTS - 1)
+        slot = kernel._stencil_slot(key)
         if cache[slot, p + 1, 0] != key:
             continue                                                       # evicted by a later pattern
         eta = t[k] - t[k - 1]
