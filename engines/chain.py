@@ -15,7 +15,10 @@ row that maps them to the contact point. From it: the chain's natural frequencie
 the contact point (`modes()`), the highest frequency of chain + ball + contact spring (the explicit
 stability limit 2/omega_max), and `model_error`, the chain's own discretisation error on t_m, f_m,
 delta_m: the reference solver run on the chain's exact modes against the continuum's (so the
-estimate is the error of the chain as a model, with no time-step error of any engine in it).
+estimate is the error of the chain as a model, with no time-step error of any engine in it), and
+`linear_model_error`, the same under a linear contact spring k (a native row's law): the exact linear
+theory on the chain's modes against the linear theory on the continuum; `model_error_diagnostics` gives
+an adapter the row's one by contact law (the Hertz one kept as `model_error_hertz_*`).
 
 `segments_for(scene, tol)` sizes N: the modes that matter (`reference.modechoice.required_modes`)
 must have chain frequencies within `tol` of the continuum's (a Hencky chain's frequency error is

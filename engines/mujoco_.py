@@ -16,7 +16,8 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
   m h^2/12, a Rayleigh beam, which lowers the chain's highest frequency (a larger stable dt) at the
   price of a model difference that grows with h/L). N is sized from the scene
   (`engines.chain.segments_for`: the modes that matter within `chain_tol` in frequency and the
-  chain's own error on t_m, f_m, delta_m within `chain_tol`), reported as `model_error`.
+  chain's own error on t_m, f_m, delta_m within `chain_tol`), reported as `model_error` (a native row's measured
+  under its linear spring: `engines.chain.linear_model_error`, the Hertz one as `model_error_hertz_*`).
   Supports: simply supported = a roller at x = 0 (slide x + free hinge) and a `<connect>` pin at
   x = L (a pin at both ends locks the chain); clamped-clamped = a roller with a 2EI/l hinge at x = 0
   and, at x = L, a `<connect>` pin plus a fixed tendon over all hinge angles (= the last segment's
