@@ -566,10 +566,10 @@ class MujocoAdapter(SteppingAdapter):
                 if k_lin is not None:
                     info["contact_stiffness"] = k_lin
                     potential = (lambda dl: 0.5 * k_lin * dl * dl)
-                    if chain is not None and self.contact_law(scene, settings) is None:
-                        # a user solref's spring, known only now: the chain's model error under it (the plan's
-                        # was Hertz); these diagnostics replace the plan's in the row (`result.model_error` keeps
-                        # the plan's Hertz value)
+                    if chain is not None:
+                        # the spring as built (a user solref's is known only now): the chain's model error under
+                        # it replaces the plan's in the row's diagnostics (cached: the plan's when the plan knew
+                        # the spring; otherwise `result.model_error` keeps the plan's Hertz one)
                         from impactval.engines.chain import model_error_diagnostics
                         from impactval.reference.hertz import ContactLaw
 

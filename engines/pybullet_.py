@@ -351,9 +351,10 @@ class PybulletAdapter(SteppingAdapter):
             k, c = sim.diagnostics.get("native_k"), sim.diagnostics.get("native_damping", 0.0)
             sim.contact_law = ContactLaw.linear(k) if k and not c else None
             chain = self.chain(scene, settings)
-            if sim.contact_law is not None and chain is not None and self.contact_law(scene, settings) is None:
-                # a spring known only now (erp/cfm with dt "auto"): the chain's model error under it replaces the
-                # plan's Hertz one in the row's diagnostics (`result.model_error` keeps the plan's)
+            if sim.contact_law is not None and chain is not None:
+                # the spring as built (erp/cfm with dt "auto" is known only now): the chain's model error under it
+                # replaces the plan's in the row's diagnostics (cached: the plan's when the plan knew the spring;
+                # otherwise `result.model_error` keeps the plan's Hertz one)
                 from impactval.engines.chain import model_error_diagnostics
 
                 sim.diagnostics.update(model_error_diagnostics(scene, chain, sim.contact_law)[1])
