@@ -206,14 +206,14 @@ def test_uncertainty_bounds_single_modes_off_the_table_grid_sweep():
                                              (5, 0.5, 100.0, 0.1)])
 def test_uncertainty_bounds_clusters_of_modes(k, s, w, spread):
     """The unresolved-mode bound adds the terms of modes in one theta bin and the bins in quadrature: k modes of about
-    one frequency (equal ones act as one mode of coupling s) must still be bounded (measured: 0 of 3,105 comparisons
+    one frequency (equal ones act as one mode of coupling s) must still be bounded (measured: 0 of 3,106 comparisons
     on the sweep below, worst 0.88 of the bound, at k 16, s 3, w 8, spread 0.3)."""
     assert not _cluster_misses(k, s, w, spread, np.geomspace(1e-10, 1e-3, 8))
 
 
 @pytest.mark.slow
 def test_uncertainty_bounds_clusters_of_modes_sweep():
-    """5 cluster sizes x 4 couplings x 6 frequencies x 4 spreads at 8 tolerances 1e-10 .. 1e-3 (3,105 comparisons):
+    """5 cluster sizes x 4 couplings x 6 frequencies x 4 spreads at 8 tolerances 1e-10 .. 1e-3 (3,106 comparisons):
     never above (worst 0.88 of the bound)."""
     misses = []
     for k in (2, 3, 5, 9, 16):
