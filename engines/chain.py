@@ -15,7 +15,10 @@ row that maps them to the contact point. From it: the chain's natural frequencie
 the contact point (`modes()`), the highest frequency of chain + ball + contact spring (the explicit
 stability limit 2/omega_max), and `model_error`, the chain's own discretisation error on t_m, f_m,
 delta_m: the reference solver run on the chain's exact modes against the continuum's (so the
-estimate is the error of the chain as a model, with no time-step error of any engine in it).
+estimate is the error of the chain as a model, with no time-step error of any engine in it), and
+`linear_model_error`, the same under a linear contact spring k (a native row's law): the exact linear
+theory on the chain's modes against the linear theory on the continuum; `model_error_diagnostics` gives
+an adapter the row's one by contact law (the Hertz one kept as `model_error_hertz_*`).
 
 `segments_for(scene, tol)` sizes N: the modes that matter (`reference.modechoice.required_modes`)
 must have chain frequencies within `tol` of the continuum's (a Hencky chain's frequency error is
@@ -227,6 +230,62 @@ def model_error(scene, chain: HenckyChain) -> ChainModelError:
     m = run.metrics
     t, f, d = _continuum_metrics(scene)
     return ChainModelError(m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0)
+
+
+@lru_cache(maxsize=16)
+def _continuum_linear_metrics(scene, k: float) -> tuple[float, float, float]:
+    from impactval.reference.linear import solve_linear
+
+    r = solve_linear(scene, tol=MODEL_ERROR_REF_TOL, stiffness=k)
+    return r.t_m, r.f_m, r.delta_m
+
+
+def linear_model_error(scene, chain: HenckyChain, k: float) -> ChainModelError:
+    """The chain's error on t_m, f_m, delta_m under a linear contact spring `k` [N/m] (a native contact's law):
+    the exact linear theory (reference/linear.py) on the chain's own modes against the linear theory on the
+    scene's continuum (its own beam theory, MODEL_ERROR_REF_TOL), signed (chain - continuum)/continuum. The
+    metrics are the ones the runner compares a linear-law row with: contact duration, peak spring force
+    k*delta_m, peak approach. A coarse or capped chain can be much further off under a linear spring than
+    `model_error` (Hertz) says: the spring's constant stiffness at small approach lets the short-wave modes
+    the chain gets wrong take part (heavy_wc_slender_timoshenko, Warp's capped N = 56: t_m +15.0 % linear,
+    +0.23 % Hertz)."""
+    k = float(k)
+    if not (math.isfinite(k) and k > 0):
+        raise ValueError(f"a linear contact spring needs a positive stiffness in N/m, got {k!r}")
+    return _linear_model_error(scene, chain, k)
+
+
+@lru_cache(maxsize=32)
+def _linear_model_error(scene, chain: HenckyChain, k: float) -> ChainModelError:
+    from impactval.reference.linear import solve_linear_modes
+
+    ball = scene.ball
+    m = solve_linear_modes(chain.modes(), ball.mass, k, ball.velocity).metrics
+    t, f, d = _continuum_linear_metrics(scene, k)
+    return ChainModelError(m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0)
+
+
+def law_model_error(scene, chain: HenckyChain, law) -> tuple[ChainModelError, str]:
+    """(the chain's model error under the contact law `law` (`reference.hertz.ContactLaw`, or None: Hertz), the law's
+    kind "hertz" or "linear"): `linear_model_error` for a linear law, else `model_error`."""
+    if law is not None and getattr(law, "kind", "") == "linear":
+        return linear_model_error(scene, chain, law.coefficient), "linear"
+    return model_error(scene, chain), "hertz"
+
+
+def model_error_diagnostics(scene, chain: HenckyChain, law, hertz: ChainModelError | None = None,
+                            prefix: str = "model_error") -> tuple[ChainModelError, dict]:
+    """(the model error the row carries, its diagnostics): `{prefix}_t_m/_f_m/_delta_m` under the row's contact law
+    (`law_model_error`) and `model_error_law` ("hertz" or "linear": the law it was measured with, which the runner
+    compares the row's error against); for a linear law also `{prefix}_hertz_*`, the Hertz one (`hertz`, when
+    already computed), so nothing is lost."""
+    me, kind = law_model_error(scene, chain, law)
+    diag = {f"{prefix}_t_m": me.t_m, f"{prefix}_f_m": me.f_m, f"{prefix}_delta_m": me.delta_m, "model_error_law": kind}
+    if kind == "linear":
+        h = hertz if hertz is not None else model_error(scene, chain)
+        diag.update({f"{prefix}_hertz_t_m": h.t_m, f"{prefix}_hertz_f_m": h.f_m, f"{prefix}_hertz_delta_m": h.delta_m,
+                     "model_error_spring": float(law.coefficient)})
+    return me, diag
 
 
 def chain_notes(scene, chain: HenckyChain, me: ChainModelError, tol: float, capped_at: int | None = None) -> list[str]:

@@ -16,7 +16,8 @@ Model (SI units, z up, the ball falls along -z, no gravity, no friction, no damp
   m h^2/12, a Rayleigh beam, which lowers the chain's highest frequency (a larger stable dt) at the
   price of a model difference that grows with h/L). N is sized from the scene
   (`engines.chain.segments_for`: the modes that matter within `chain_tol` in frequency and the
-  chain's own error on t_m, f_m, delta_m within `chain_tol`), reported as `model_error`.
+  chain's own error on t_m, f_m, delta_m within `chain_tol`), reported as `model_error` (a native row's measured
+  under its linear spring: `engines.chain.linear_model_error`, the Hertz one as `model_error_hertz_*`).
   Supports: simply supported = a roller at x = 0 (slide x + free hinge) and a `<connect>` pin at
   x = L (a pin at both ends locks the chain); clamped-clamped = a roller with a 2EI/l hinge at x = 0
   and, at x = L, a `<connect>` pin plus a fixed tendon over all hinge angles (= the last segment's
@@ -503,7 +504,7 @@ class MujocoAdapter(SteppingAdapter):
         return super().contact_law(scene, settings)
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
-        from impactval.engines.chain import chain_notes, model_error
+        from impactval.engines.chain import chain_notes, model_error, model_error_diagnostics
         from impactval.reference.hertz import ContactLaw
 
         _check_kind(scene)
@@ -517,11 +518,13 @@ class MujocoAdapter(SteppingAdapter):
         notes: list[str] = []
         err = math.nan
         if chain is not None:
-            me = model_error(scene, chain)
+            hertz = model_error(scene, chain)      # the sizing's (and its notes') measure
+            # the row's: under its own contact law (a native row's linear spring k: the chain's linear theory vs
+            # the continuum's, what the runner compares it with; a user solref's k is known after build, see there)
+            me, me_diag = model_error_diagnostics(scene, chain, law, hertz)
             err = me.largest
-            diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m,
-                        rotary_inertia=chain.rotary)
-            notes = chain_notes(scene, chain, me, float(settings.option("chain_tol", DEFAULT_CHAIN_TOL)))
+            diag.update(segments=chain.n, **me_diag, rotary_inertia=chain.rotary)
+            notes = chain_notes(scene, chain, hertz, float(settings.option("chain_tol", DEFAULT_CHAIN_TOL)))
         elif scene.target.kind in ("rigid-plate", "ball", "modal"):
             err = 0.0           # a modal target is its modes exactly: one oscillator per mode
         return Plan(STABILITY[integ] / om, f"{integ}, {what}", err, diag, tuple(notes))
@@ -563,6 +566,14 @@ class MujocoAdapter(SteppingAdapter):
                 if k_lin is not None:
                     info["contact_stiffness"] = k_lin
                     potential = (lambda dl: 0.5 * k_lin * dl * dl)
+                    if chain is not None:
+                        # the spring as built (a user solref's is known only now): the chain's model error under
+                        # it replaces the plan's in the row's diagnostics (cached: the plan's when the plan knew
+                        # the spring; otherwise `result.model_error` keeps the plan's Hertz one)
+                        from impactval.engines.chain import model_error_diagnostics
+                        from impactval.reference.hertz import ContactLaw
+
+                        info.update(model_error_diagnostics(scene, chain, ContactLaw.linear(k_lin))[1])
                 else:
                     potential = _tabulated_potential(mujoco, model, scene, plate)
             else:

@@ -234,13 +234,18 @@ class MujocoWarpAdapter(EngineAdapter):
             if settings.segments is None:
                 c_n = default_segments(scene, EngineSettings(options=(("chain_tol", settings.options.chain_tol),)))
                 if c_n > lay.n_segments:
-                    from impactval.engines.chain import hencky_chain, model_error
+                    from impactval.engines.chain import hencky_chain, law_model_error
+                    from impactval.reference.hertz import ContactLaw
 
-                    me = model_error(scene, hencky_chain(scene.target, lay.n_segments, settings.options.rotary_inertia,
-                                                         shear=timoshenko(scene)))
+                    k_lin = info.get("contact_stiffness") if contact == "native" else None
+                    me, kind = law_model_error(scene, hencky_chain(scene.target, lay.n_segments,
+                                                                   settings.options.rotary_inertia,
+                                                                   shear=timoshenko(scene)),
+                                               ContactLaw.linear(k_lin) if k_lin else None)
+                    spring = f" under the native spring {k_lin:.3g} N/m" if kind == "linear" else ""
                     notes.append(f"chain capped at {lay.n_segments} segments for float32 (MAX_SEGMENTS, COND_LIMIT; "
                                  f"rotary inertia {settings.options.rotary_inertia!r}); MuJoCo C's sizing asks for {c_n}; "
-                                 f"predicted model error t_m {100 * me.t_m:+.2g} / f_m {100 * me.f_m:+.2g} % (the capped "
+                                 f"predicted model error{spring} t_m {100 * me.t_m:+.2g} / f_m {100 * me.f_m:+.2g} % (the capped "
                                  f"chain's own: its f_m swings with where the hit falls in a segment, and the sizing takes "
                                  f"the N near the cap with the smallest)")
         sim = Simulation(t=t, delta=s[:, 0], f=s[:, 1], x_ball=x_ball, x_structure=s[:, 2], v_ball=v_ball,

@@ -193,7 +193,7 @@ class NewtonAdapter(EngineAdapter):
     def plan(self, scene, settings: EngineSettings) -> Plan:
         """Stability limit 2/omega_max of chain + ball + contact spring; for SemiImplicit, of the chain as it
         integrates it: free planar segments held by the penalty attachments (`penalty_chain_omega_max`)."""
-        from impactval.engines.chain import model_error
+        from impactval.engines.chain import model_error, model_error_diagnostics
         from impactval.reference.hertz import ContactLaw
 
         if scene.target.kind not in ("rigid-plate", "beam"):
@@ -205,10 +205,11 @@ class NewtonAdapter(EngineAdapter):
         diag: dict = {}
         err = 0.0 if chain is None else math.nan
         if chain is not None:
-            me = model_error(scene, chain)
+            # under the row's contact law (native: the linear spring ke = k0, the chain's linear theory vs the
+            # continuum's, what the runner compares it with; the Hertz one then under model_error_hertz_*)
+            me, me_diag = model_error_diagnostics(scene, chain, law, model_error(scene, chain))
             err = me.largest
-            diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m,
-                        model_error_delta_m=me.delta_m, rotary_inertia=chain.rotary)
+            diag.update(segments=chain.n, **me_diag, rotary_inertia=chain.rotary)
             if integ == "semi-implicit":
                 ke = self.attach_ke(scene, settings)
                 give = penalty_give(scene, chain, ke)

@@ -268,7 +268,7 @@ class PybulletAdapter(SteppingAdapter):
         return super().contact_law(scene, settings)
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
-        from impactval.engines.chain import model_error
+        from impactval.engines.chain import model_error, model_error_diagnostics
         from impactval.reference.hertz import ContactLaw
 
         kind = scene.target.kind
@@ -283,12 +283,15 @@ class PybulletAdapter(SteppingAdapter):
         notes: list[str] = []
         err = 0.0
         if chain is not None:
-            me = model_error(scene, chain)
+            hertz = model_error(scene, chain)      # the sizing's (and its notes') measure
+            # the row's: under its own contact law (a native linear spring k: the chain's linear theory vs the
+            # continuum's, what the runner compares it with; a damped or erp/cfm law unknown here: Hertz's)
+            me, me_diag = model_error_diagnostics(scene, chain, self.contact_law(scene, settings) and law, hertz)
             err = me.largest
-            diag.update(segments=chain.n, model_error_t_m=me.t_m, model_error_f_m=me.f_m, model_error_delta_m=me.delta_m)
+            diag.update(segments=chain.n, **me_diag)
             tol = float(settings.option("chain_tol", DEFAULT_CHAIN_TOL))
             cap = sized_cap(scene)
-            notes = chain_notes(scene, chain, me, tol, cap if settings.segments is None else None)
+            notes = chain_notes(scene, chain, hertz, tol, cap if settings.segments is None else None)
             if chain.shear and settings.segments is None and any(v.startswith("chain capped") for v in notes):
                 notes.append(f"Timoshenko chain: a slide and a hinge link per segment, so at most {cap} segments "
                              f"({MAX_SIZED_LINKS} of Bullet's {MAX_LINKS} links per multibody)")
@@ -347,6 +350,14 @@ class PybulletAdapter(SteppingAdapter):
 
             k, c = sim.diagnostics.get("native_k"), sim.diagnostics.get("native_damping", 0.0)
             sim.contact_law = ContactLaw.linear(k) if k and not c else None
+            chain = self.chain(scene, settings)
+            if sim.contact_law is not None and chain is not None:
+                # the spring as built (erp/cfm with dt "auto" is known only now): the chain's model error under it
+                # replaces the plan's in the row's diagnostics (cached: the plan's when the plan knew the spring;
+                # otherwise `result.model_error` keeps the plan's Hertz one)
+                from impactval.engines.chain import model_error_diagnostics
+
+                sim.diagnostics.update(model_error_diagnostics(scene, chain, sim.contact_law)[1])
         if scene.target.kind == "beam":
             from impactval.engines.chain import continuum_frequencies
 

@@ -190,11 +190,37 @@ def _explain(sc, tol: float) -> None:
     elif sc.target.kind != "rigid-plate":
         click.echo(f"  modes the solve used: {len(sc.target.omega) if sc.target.kind == 'modal' else sc.target.modes} "
                    f"(the scene's)")
+    if sc.target.kind == "beam":
+        _explain_theory(sc)
     size = np.maximum(np.abs(c.d_t), np.abs(c.d_f))
     top = sorted(int(i) for i in np.argsort(-size)[:8] if size[i] > 0)
     click.echo(f"  {'mode':>6s} {'omega [rad/s]':>14s} {'w':>9s} {'s':>9s} {'s*TH (t_m)':>11s} {'1.5s*MH (f_m)':>13s}")
     for j in top:
         click.echo(f"  {j + 1:6d} {c.omega[j]:14.6g} {c.w[j]:9.4g} {c.s[j]:9.4g} {c.d_t[j]:+11.3e} {c.d_f[j]:+13.3e}")
+
+
+#: above this beam-theory gap (relative, any metric) an Euler-Bernoulli scene's explanation recommends Timoshenko
+THEORY_NOTE = 0.01
+
+
+def _explain_theory(sc) -> None:
+    """How much the beam theory alone moves the answer: the reference with the other theory (the run report's
+    theory gap, `runner.theory_gap`), and a recommendation when an Euler-Bernoulli beam is off Timoshenko's by more than
+    THEORY_NOTE (shear and rotary inertia: short beams, and slender ones whose contact excites high modes)."""
+    import impactval
+    from impactval.runner import THEORY_GAP_TOL, theory_gap
+
+    ref = impactval.solve(sc, tol=THEORY_GAP_TOL)      # both theories at 1e-5 whatever --tol: the gap is shown to 0.01 %
+    g = theory_gap(sc, ref, THEORY_GAP_TOL)
+    if not all(math.isfinite(v) for v in g.gap.values()):
+        click.echo(f"  beam theory: the reference with theory = \"{g.other}\" did not solve; no theory gap")
+        return
+    line = (f"  beam theory: with theory = \"{g.other}\" the reference moves by t_m {100 * g.gap['t_m']:+.2f} %, "
+            f"f_m {100 * g.gap['f_m']:+.2f} %, delta_m {100 * g.gap['delta_m']:+.2f} %")
+    if g.other == "timoshenko" and max(abs(v) for v in g.gap.values()) > THEORY_NOTE:
+        line += (f" (above {100 * THEORY_NOTE:g} %: shear and rotary inertia matter here; a real beam of these "
+                 "proportions behaves like Timoshenko's, set theory = \"timoshenko\" in the scene)")
+    click.echo(line)
 
 
 def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: bool, curve: str | None,

@@ -191,8 +191,9 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     """One results row (see COLUMNS; errors are signed fractions (engine - reference) / reference).
 
     The error is split per metric into `structure_err_*` (the engine's structure model vs the scene's
-    continuum, from the adapter's `model_error_*` diagnostics) and `numerics_err_*` = err - structure
-    (Hertz laws only); `theory_gap_*` (from `theory`, beam scenes) is the other beam theory's reference
+    continuum, from the adapter's `model_error_*` diagnostics, measured under the row's contact law: the
+    adapter's `model_error_law`) and `numerics_err_*` = err - structure (Hertz laws), lin_err - structure (a
+    linear law whose structure part is measured under that spring, against the linear theory; else NaN); `theory_gap_*` (from `theory`, beam scenes) is the other beam theory's reference
     relative to this one; `vs_mujoco_c_*` is MuJoCo Warp against MuJoCo C on the identical model."""
     err = relative_errors(res, ref) if res.success else dict.fromkeys(METRICS, math.nan)
     diag = res.diagnostics or {}
@@ -224,7 +225,14 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     )
     structure = structure_errors(diag)
     hertz = law.kind == "hertz" if law is not None else settings.contact == "hertz"
-    numerics = error_split(err, structure, hertz)
+    lin_err = dict.fromkeys(METRICS, math.nan)
+    if lin is not None and lin.success and res.success:
+        lin_err = relative_errors(res, lin)
+    if not hertz and diag.get("model_error_law") == "linear":
+        # a linear law whose structure part is measured under the same spring: the split against the linear theory
+        numerics = error_split(lin_err, structure, True)
+    else:
+        numerics = error_split(err, structure, hertz)
     vs_c = vs_mujoco_c(diag)
     for m in METRICS:
         row.update({f"structure_err_{m}": structure[m], f"numerics_err_{m}": numerics[m],
@@ -240,11 +248,9 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     if lin is not None and lin.success:
         row.update(lin_t_m=lin.t_m, lin_f_m=lin.f_m, lin_delta_m=lin.delta_m)
         if res.success:
-            le = relative_errors(res, lin)
-            row.update(lin_err_t_m=le["t_m"], lin_err_f_m=le["f_m"], lin_err_delta_m=le["delta_m"],
+            row.update(lin_err_t_m=lin_err["t_m"], lin_err_f_m=lin_err["f_m"], lin_err_delta_m=lin_err["delta_m"],
                        lin_err_curve=curve_error(res, lin))
     if res.success:
-        lin_err = {m: _num(row.get(f"lin_err_{m}")) for m in METRICS}
         notes = row_notes(res, err if hertz else lin_err, structure, hertz or any(map(math.isfinite, lin_err.values())),
                           against="the Hertz reference" if hertz else "the linear theory")
         if notes:
@@ -269,7 +275,11 @@ def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, flo
     if check:
         me = _num(res.model_error)
         worst = []
-        signed = against == "the Hertz reference"     # structure_err is measured with the Hertz law
+        # structure_err is comparable sign for sign when measured under the law the error is taken against: the
+        # adapter says which (`model_error_law`, "linear" for a chain's linear theory under the native spring k);
+        # an estimate measured with Hertz on a linear-law row only bounds the magnitude
+        law = str((res.diagnostics or {}).get("model_error_law", "hertz"))
+        signed = law == ("hertz" if against == "the Hertz reference" else "linear")
         for m in METRICS:
             if math.isfinite(structure[m]):
                 excess = abs(err[m] - structure[m]) if signed else abs(err[m]) - abs(structure[m])
@@ -278,7 +288,8 @@ def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, flo
             if math.isfinite(excess) and excess > UNEXPLAINED_ERROR:
                 worst.append(f"{m} {100 * err[m]:+.2f} %")
         if worst:
-            est = ("its model's own estimate" if any(math.isfinite(v) for v in structure.values())
+            spring = " under this spring" if signed and against != "the Hertz reference" else ""
+            est = (f"its model's own estimate{spring}" if any(math.isfinite(v) for v in structure.values())
                    else f"its model error {100 * me:.2f} %" if math.isfinite(me) else "a model error of 0 (none reported)")
             cause = (f"the time step (dt = {_num(res.dt):.3g} s), the integrator or the engine; try a smaller --dt"
                      if signed else

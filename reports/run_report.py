@@ -502,7 +502,8 @@ def error_source_section(df: pd.DataFrame) -> list[str]:
     out = ["## Where the error comes from", "",
            "Per metric, error = structure + numerics (signed, in % of the scene's reference): *structure* is the "
            "engine's structure model against the scene's continuum (the reference solved on the model's own "
-           "modes), *numerics* what the engine's integrator and contact add. The *theory gap* is the reference "
+           "modes), *numerics* what the engine's integrator and contact add (a linear contact law: its error against the "
+           "linear theory for the same spring, the structure model measured under that spring). The *theory gap* is the reference "
            "solved with the other beam theory against the scene's: the size of the structure-theory question.", ""]
     for _, r in rows.iterrows():
         scene = str(r["scene"])
@@ -512,9 +513,15 @@ def error_source_section(df: pd.DataFrame) -> list[str]:
         label = ", ".join(x for x in (str(r["contact"]), f"dt = {_dt(r['dt'])} s",
                                       f"N = {_seg(r['segments'])}" if _seg(r["segments"]) else "") if x)
         parts = []
+        linear = str(_col(r, "contact_law")) == "linear"
         for m in _METRICS:
             e, s, n = (_num(_col(r, f"{p}_{m}")) for p in ("err", "structure_err", "numerics_err"))
-            if math.isfinite(s) and math.isfinite(n):
+            le = _num(_col(r, f"lin_err_{m}"))
+            if linear and math.isfinite(s) and math.isfinite(n) and math.isfinite(le):
+                # the runner splits a linear law's error against the linear theory (structure under that spring)
+                parts.append(f"{m} {_pct(e)} % (against the linear theory {_pct(le)} % = structure {_pct(s)} % "
+                             f"+ numerics {_pct(n)} %)")
+            elif math.isfinite(s) and math.isfinite(n):
                 parts.append(f"{m} {_pct(e)} % = structure {_pct(s)} % + numerics {_pct(n)} %")
             elif math.isfinite(s):
                 why = "linear contact law: see the lin columns" if str(_col(r, "contact_law")) == "linear" \

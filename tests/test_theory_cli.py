@@ -80,3 +80,25 @@ def test_theory_command_writes_pages(tmp_path):
     line = next(l for l in out.stdout.splitlines() if l.startswith("plate_steel"))
     f_pct = float(line.split("f_m")[1].split("%")[0])
     assert f_pct == pytest.approx(-20.0, abs=1e-3)
+
+
+def test_explain_gives_the_beam_theory_gap_and_recommends_timoshenko_above_one_percent():
+    """`--explain` on a beam solves the other beam theory too: the printed gap equals the two references solved here
+    directly (Euler-Bernoulli worked beam: Timoshenko moves t_m by +2.29 %, above 1 %: recommended); a beam under 1 %
+    gets the gap without the recommendation."""
+    import dataclasses
+    import re
+
+    def gap(name):
+        sc = impactval.load_scene(name)
+        tim = dataclasses.replace(sc, target=dataclasses.replace(sc.target, theory="timoshenko"))
+        a, b = impactval.solve(sc, tol=1e-5), impactval.solve(tim, tol=1e-5)
+        return [100 * (getattr(b, m) / getattr(a, m) - 1) for m in ("t_m", "f_m", "delta_m")]
+
+    for name, recommend in (("beam_ss_midspan", True), ("light_ball_heavy_beam", False)):
+        out = cli("reference", name, "--explain", "--tol", "1e-3")
+        assert out.returncode == 0, out.stderr
+        line = next(ln for ln in out.stdout.splitlines() if "beam theory:" in ln)
+        printed = [float(x) for x in re.findall(r"([+-]\d+\.\d+) %", line)[:3]]
+        assert printed == pytest.approx(gap(name), abs=0.006), line
+        assert ('set theory = "timoshenko"' in line) == recommend, line
