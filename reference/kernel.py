@@ -1275,23 +1275,16 @@ def solve_auto_packed(*args):
     array. Returns (status, n_nodes, series [7, n_nodes]: t [s], delta [m], f [N], x_ball [m], u_ball [m/s],
     energy [J], x_structure = x_ball - delta [m]; contacts, rel_uncertainty, base step count n, index of the node
     ending the first contact, largest |E/E0 - 1|), as `solve_auto` (the flags, which the caller does not need, are
-    left out: each boxed array also costs an unpickling of its type, ~0.5 us). Each row is copied in its own loop, so a
-    long window's series are not all held twice at once (a series is freed after its last use)."""
+    left out: each boxed array also costs an unpickling of its type, ~0.5 us)."""
     st, cnt, t, d, f, x, u, e, fl, fine, rel, n, end, drift = solve_auto(*args)
     cnt_out = min(cnt, t.shape[0])
     series = np.empty((7, cnt_out))
     for i in range(cnt_out):
         series[6, i] = x[i] - d[i]
-    for i in range(cnt_out):
-        series[0, i] = t[i]
-    for i in range(cnt_out):
-        series[1, i] = d[i]
-    for i in range(cnt_out):
-        series[2, i] = f[i]
-    for i in range(cnt_out):
-        series[3, i] = x[i]
-    for i in range(cnt_out):
-        series[4, i] = u[i]
-    for i in range(cnt_out):
-        series[5, i] = e[i]
+    series[0, :] = t[:cnt_out]
+    series[1, :] = d[:cnt_out]
+    series[2, :] = f[:cnt_out]
+    series[3, :] = x[:cnt_out]
+    series[4, :] = u[:cnt_out]
+    series[5, :] = e[:cnt_out]
     return st, cnt, series, fine, rel, n, end, drift
