@@ -1108,8 +1108,8 @@ def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
     random scenes (seeds 0-3999 and 8000-11999: 0 of 22,924 comparisons above; 4000-7999: 2 of 11,454, 1.69x and 1.17x,
     Richardson before its asymptotic range at tol 1e-4, the second 1.09x with the plain sum), clusters of 2-16
     near-equal modes (0 of 3,106) and single modes (0 of 4,046); the plain sum (`plain_sum` True) was 16-3000x the real
-    error of beams of many modes. `plain_sum` True
-    returns that sum (`largest_step`: the first base step, a guess that leaves the estimate room)."""
+    error of beams of many modes. `plain_sum` True returns that sum (`largest_step`: the first base step, a guess
+    that leaves the estimate room)."""
     if plain_sum is not None:
         total = 0.0
         for i in range(omega.shape[0]):

@@ -164,15 +164,17 @@ def levels(n_steps: float, tol: float) -> int:
 #: bins of (3.5, 5.5]. One row per coupling class (UNRESOLVED_CLASSES): s <= 1, and s above (strongly coupled modes,
 #: whose error at omega_c H >= 2.7 is up to ~20 s w^-3.5; a running maximum throughout). A third class (s <= 0.2, up
 #: to 40x below s <= 1 at theta ~1) was tried: tighter (17 of 25 scenes within 10x against 15) but its smaller first
-#: steps made the step control retry more often (the worked beam at tols 1e-4 .. 1e-8: 15-30 % slower in sum). A step function (the value of
-#: the first point >= theta), ~theta^6 below the table, above it max(C[-1], C[-1] sqrt(w)/4) (a stiff mode's raw error
-#: falls like w^-3, not w^-3.5). The table before (a running maximum of each bin alone, 16 w and 9 s values, 160
-#: steps) was 50x below a mode off its grid (s 1, w 15 at theta 1.14) and 5x below one just past a bin edge (s 0.85,
-#: w 50 at theta 1.800): single-mode solves reported up to 1.87x less than their real error; with this table 0 of
-#: 2,531 such off-grid comparisons (worst 0.52 of the bound). Checked by tests/test_convergence.py
+#: steps made the step control retry more often (the worked beam at tols 1e-4 .. 1e-8: 15-30 % slower in sum).
+#: A step function (the value of the first point >= theta), ~theta^6 below the table, above it
+#: max(C[-1], C[-1] sqrt(w)/4) (a stiff mode's raw error falls like w^-3, not w^-3.5). The table before (a running
+#: maximum of each bin alone, 16 w and 9 s values, 160 steps) was 50x below a mode off its grid (s 1, w 15 at theta
+#: 1.14) and 5x below one just past a bin edge (s 0.85, w 50 at theta 1.800): single-mode solves reported up to 1.87x
+#: less than their real error (4 of 2,542 off-grid comparisons); with this table 0 of 4,046 (14 couplings x 16
+#: frequencies off the grid x 22 tolerances, worst 0.52 of the bound). Checked by tests/test_convergence.py
 #: (test_unresolved_mode_error_table on the grid, test_uncertainty_bounds_single_modes_off_the_table_grid* off it).
-UNRESOLVED_THETA = np.array([0.35, 0.5, 0.6, 0.7, 0.8, 1, 1.2, 1.5, 1.65, 1.8, 2, 2.2, 2.45, 2.7, 3, 3.25, 3.5, 3.75, 4, 4.25, 4.5, 4.75, 5,
-                             5.25, 5.5, 5.75, 6, 6.25, 6.5, 6.75, 7, 7.25, 7.5, 7.75, 8, 8.5, 9, 10, 11, 12, 13, 14, 15, 16, 18, 20])
+UNRESOLVED_THETA = np.array([0.35, 0.5, 0.6, 0.7, 0.8, 1, 1.2, 1.5, 1.65, 1.8, 2, 2.2, 2.45, 2.7, 3, 3.25, 3.5,
+                             3.75, 4, 4.25, 4.5, 4.75, 5, 5.25, 5.5, 5.75, 6, 6.25, 6.5, 6.75, 7, 7.25, 7.5, 7.75,
+                             8, 8.5, 9, 10, 11, 12, 13, 14, 15, 16, 18, 20])
 UNRESOLVED_C = np.array([
     [3.00e-06, 3.00e-06, 1.42e-05, 3.61e-05, 2.26e-04, 3.72e-03, 3.72e-03, 4.09e-03, 4.09e-03, 1.73e-02,
      2.99e-02, 2.99e-02, 4.20e-02, 5.61e-02, 5.61e-02, 6.04e-02, 7.89e-02, 1.46e-01, 1.46e-01, 1.46e-01,
@@ -184,7 +186,8 @@ UNRESOLVED_C = np.array([
      7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01,
      7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01,
      7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01, 7.01e+01]])
-#: the coupling classes of the table's rows: row k holds the modes with UNRESOLVED_CLASSES[k-1] < s <= UNRESOLVED_CLASSES[k]
+#: the coupling classes of the table's rows: row k holds the modes with
+#: UNRESOLVED_CLASSES[k-1] < s <= UNRESOLVED_CLASSES[k]
 UNRESOLVED_CLASSES = np.array([1.0])
 #: the base step is at most t_plate / MIN_STEPS: the coarsest of the three runs (4H) then has >= 8 steps per rigid-plate
 #: time. Coarser, the errors at H, 2H, 4H were not monotone (random plates at tol 1e-4, n = 16-25: 1.2-3.1x above the
