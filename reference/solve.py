@@ -162,9 +162,9 @@ def levels(n_steps: float, tol: float) -> int:
 #: measurements: its excess peaks where one base step holds a whole period of the mode (theta near 2 pi: up to 1.24;
 #: near 4 pi: 1.44; all three runs of the estimate then alias the mode alike) and is <= 0.06 between, floored at the
 #: bins of (3.5, 5.5]. One row per coupling class (UNRESOLVED_CLASSES): s <= 1, and s above (strongly coupled modes,
-#: whose error at omega_c H >= 2.7 is up to ~20 s w^-3.5; a running maximum throughout). A third class (s <= 0.2, up
-#: to 40x below s <= 1 at theta ~1) was tried with the plain sum: 17 of 25 scenes within 10x against 15, but its smaller first
-#: steps made the step control retry more often (the worked beam, tols 1e-4 .. 1e-8: 15-30 % slower in sum).
+#: whose error at omega_c H >= 2.7 is up to ~20 s w^-3.5; a running maximum throughout). A third class (s <= 0.2,
+#: up to 40x below s <= 1 at theta ~1) was tried with the plain sum: 17 of 25 scenes within 10x against 15, but its
+#: smaller first steps made the step control retry more often (the worked beam, tols 1e-4 .. 1e-8: 15-30 % slower).
 #: A step function (the value of the first point >= theta), ~theta^6 below the table, above it
 #: max(C[-1], C[-1] sqrt(w)/4) (a stiff mode's raw error falls like w^-3, not w^-3.5). The table before (a running
 #: maximum of each bin alone, 16 w and 9 s values, 160 steps) was 50x below a mode off its grid (s 1, w 15 at theta
