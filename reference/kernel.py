@@ -288,18 +288,29 @@ def _stencil_sig(sig: np.ndarray, m: int, j: int, glev: np.ndarray) -> None:
 def _contact_root(D: float, B: float, alpha: float):
     """(delta, sqrt(delta)): the root delta > 0 of delta + B alpha delta^1.5 = D (D > 0) and its square root.
 
-    Newton on s = sqrt(delta), s^2 (1 + c s) = D (c = B alpha): no root per iteration (one division). Start: with
-    e = c sqrt(D) <= 0.01 (the structure-dominated contact: e ~ 1e-5 .. 2e-3 on the worked beam) the series
-    sqrt(D) (1 - e/2 + 5 e^2/8), off by ~e^3, so one step is usually the last; else the smaller of the upper bounds
-    sqrt(D) and (D/c)^(1/3), from which Newton descends monotonically (s^2 (1 + c s) - D is convex and increasing).
-    The error after a step s_k is <= s_k^2 / s (the convexity bound), so the loop stops once the step is <= 1e-8 s,
-    or when the steps stop shrinking (roundoff). A last Newton step on delta itself removes the rounding of s^2:
-    delta and sqrt(delta) within ~2.2e-16 (relative) of the exact root (tests/test_solver_speed_invariance.py)."""
+    With s = sqrt(delta) = sqrt(D) sigma, sigma^2 (1 + e sigma) = 1 (c = B alpha, e = c sqrt(D)). For e <= 0.01 (the
+    structure-dominated contact: e ~ 1e-5 .. 2e-3 on the worked beam) sigma - 1 and sigma^2 - 1 are their series in e
+    to e^9 (Lagrange inversion; radius of convergence 2/sqrt(27), the first term left out below 2e-18), evaluated by
+    Estrin's scheme, so that the root costs a square root and a few multiplications (no division and no Newton loop:
+    the root is on the step's dependency chain). Else Newton on s, s^2 (1 + c s) = D (no root per iteration, one
+    division) from the smaller of the upper bounds sqrt(D) and (D/c)^(1/3), from which it descends monotonically
+    (s^2 (1 + c s) - D is convex and increasing); the error after a step s_k is <= s_k^2 / s (the convexity bound), so
+    the loop stops once the step is <= 1e-8 s, or when the steps stop shrinking (roundoff), and a last Newton step on
+    delta itself removes the rounding of s^2. Both ways delta and sqrt(delta) are within ~2.2e-16 (relative) of the
+    exact root (tests/test_solver_speed_invariance.py)."""
     c = B * alpha
     s = np.sqrt(D)
     e = c * s
     if e <= 0.01:
-        s *= 1.0 - e * (0.5 - 0.625 * e)
+        e2 = e * e
+        e4 = e2 * e2
+        # sigma - 1 and sigma^2 - 1 (sigma = s / sqrt(D)) as series in e, Estrin's scheme, truncated below 2e-18;
+        # the coefficients are exact dyadic fractions (-1/2, 5/8, -1, 231/128, ...; -1, 3/2, -21/8, 5, -1287/128, ...)
+        t = e * ((-0.5 + 0.625 * e) + (-1.0 + 1.8046875 * e) * e2
+                 + ((-3.5 + 7.1220703125 * e) + (-15.0 + 32.420257568359375 * e) * e2) * e4 + -71.5 * (e4 * e4))
+        q = e * ((-1.0 + 1.5 * e) + (-2.625 + 5.0 * e) * e2
+                 + ((-10.0546875 + 21.0 * e) + (-45.1064453125 + 99.0 * e) * e2) * e4 + -221.04721069335938 * (e4 * e4))
+        return D + D * q, s + s * t
     elif e > 1.0:
         s2 = np.cbrt(D / c)
         if s2 < s:
@@ -380,6 +391,26 @@ def _sweep(Er, Ei, Kr, Ki, jt, coef, yr, yi, ew, m):
         emod += ew[i] * (yr[i] * yr[i] + yi[i] * yi[i])
         nxt += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
     return emod, nxt
+
+
+@njit(cache=True, fastmath=True, error_model="numpy", inline="always")
+def _step_sums(acc, a_known, c, S, jt, inv1, inv2, nl):
+    """`run`'s sums over the force polynomial's first nl coefficients (known part a_known, new node's c): (acc +
+    sum a_l S[jt, l], sum a_l inv1_l, sum a_l inv2_l, sum c_l inv1_l, sum c_l inv2_l, sum c_l S[jt, l]). Inlined, so
+    that a literal nl (degree 5: 6) unrolls."""
+    wu = 0.0
+    wx = 0.0
+    cu = 0.0
+    cx = 0.0
+    cs = 0.0
+    for l in range(nl):
+        acc += a_known[l] * S[jt, l]
+        wu += a_known[l] * inv1[l]
+        wx += a_known[l] * inv2[l]
+        cu += c[l] * inv1[l]
+        cx += c[l] * inv2[l]
+        cs += c[l] * S[jt, l]
+    return acc, wu, wx, cu, cx, cs
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -575,15 +606,22 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 _stencil_sig(sig, m, j, glev)
                 _lagrange_coeffs(sig, m, cache[slot], Pw)
                 cache[slot, p + 1, 0] = -1.0
-            for l in range(p + 1):
-                a_known[l] = 0.0
-                c[l] = 0.0
-            for l in range(m + 1):
-                acc_l = 0.0
-                for k in range(m):
-                    acc_l += cache[slot, k, l] * fa[first + k]
-                a_known[l] = acc_l
-                c[l] = cache[slot, m, l]
+            if p == 5 and m == 5:      # the usual stencil, unrolled (straight-line code: 0.74x the scalar cost)
+                f0, f1, f2, f3, f4 = fa[first], fa[first + 1], fa[first + 2], fa[first + 3], fa[first + 4]
+                for l in range(6):
+                    a_known[l] = (cache[slot, 0, l] * f0 + cache[slot, 1, l] * f1 + cache[slot, 2, l] * f2
+                                  + cache[slot, 3, l] * f3 + cache[slot, 4, l] * f4)
+                    c[l] = cache[slot, 5, l]
+            else:
+                for l in range(p + 1):
+                    a_known[l] = 0.0
+                    c[l] = 0.0
+                for l in range(m + 1):
+                    acc_l = 0.0
+                    for k in range(m):
+                        acc_l += cache[slot, k, l] * fa[first + k]
+                    a_known[l] = acc_l
+                    c[l] = cache[slot, m, l]
             # the structure displacement the known part of the force would give: sum_i Im(E_i y_i) plus
             # sum_l a_l S[jt, l] (S = the tables summed over modes); the first sum comes with the last accepted
             # step's sweep when the step size repeats, else from one short sweep here. The modes themselves are
@@ -594,18 +632,10 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
                 acc = 0.0
                 for i in range(n):
                     acc += Er[jt, i] * yi[i] + Ei[jt, i] * yr[i]
-            wu = 0.0
-            wx = 0.0
-            cu = 0.0
-            cx = 0.0
-            cs = 0.0
-            for l in range(m + 1):
-                acc += a_known[l] * S[jt, l]
-                wu += a_known[l] * inv1[l]
-                wx += a_known[l] * inv2[l]
-                cu += c[l] * inv1[l]
-                cx += c[l] * inv2[l]
-                cs += c[l] * S[jt, l]
+            if p == 5:                 # a fixed trip count, unrolled (a_known and c are 0 above m)
+                acc, wu, wx, cu, cx, cs = _step_sums(acc, a_known, c, S, jt, inv1, inv2, 6)
+            else:
+                acc, wu, wx, cu, cx, cs = _step_sums(acc, a_known, c, S, jt, inv1, inv2, m + 1)
             u_pre = u - eta * wu * inv_m0
             x1_pre = x1 + u * eta - eta * eta * wx * inv_m0
             B = eta * eta * cx * inv_m0 + cs + R
