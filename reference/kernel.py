@@ -447,18 +447,15 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     yi = np.zeros(n)
     d_top = 0.0                       # the first contact's largest delta so far (for peak_state)
     first_open = True                 # the first contact has not ended yet
-    nodes = np.empty((6, max_nodes))  # the six node series as rows of one allocation (each array costs ~25-50 ns)
-    ta = nodes[0]
-    da = nodes[1]
-    fa = nodes[2]
-    xa = nodes[3]
-    ua = nodes[4]
-    ea = nodes[5]
+    ta = np.empty(max_nodes)
+    da = np.empty(max_nodes)
+    fa = np.empty(max_nodes)
+    xa = np.empty(max_nodes)
+    ua = np.empty(max_nodes)
+    ea = np.empty(max_nodes)
     flags = np.zeros(max_nodes, dtype=np.int8)
-    q1 = p + 1                        # the small work arrays below: slices of one allocation too
-    work = np.empty(7 * q1 + 1 + 2 * (J + 1))
-    sig = work[:q1]
-    Pw = work[q1:2 * q1 + 1]
+    sig = np.empty(p + 1)
+    Pw = np.empty(p + 2)
     glev = np.zeros(max(p, 1), dtype=np.int64)    # levels of the last accepted steps, the newest first
     # a stencil is keyed by its step levels (6 bits each, relative to the new step's): up to degree 10, 31 levels
     keyed = p <= 10 and J + 1 <= 32
@@ -466,14 +463,13 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         cache = stencil_cache(p)
     else:
         cache = stencils
-    a_known = work[2 * q1 + 1:3 * q1 + 1]
-    c = work[3 * q1 + 1:4 * q1 + 1]
-    coef = work[4 * q1 + 1:5 * q1 + 1]    # the step's force polynomial, new node included
-    coef[:] = 0.0
+    a_known = np.empty(p + 1)
+    c = np.empty(p + 1)
+    coef = np.zeros(p + 1)            # the step's force polynomial, new node included
     free_jt = -1                      # table level at which free_acc = sum_i Im(E_i y_i) holds for the current y
     free_acc = 0.0
-    inv1 = work[5 * q1 + 1:6 * q1 + 1]    # 1/(l+1): ball velocity weights
-    inv2 = work[6 * q1 + 1:7 * q1 + 1]    # 1/((l+1)(l+2)): ball displacement weights
+    inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
+    inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
     for l in range(p + 1):
         inv1[l] = 1.0 / (l + 1)
         inv2[l] = 1.0 / ((l + 1) * (l + 2))
@@ -497,12 +493,14 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     seg_start = 0
     j_prev = J
     t_end = -1.0
-    o = 7 * q1 + 1
-    etas = work[o:o + J + 1]
-    thr = work[o + J + 1:o + 2 * (J + 1)]
+    etas = np.empty(J + 1)
+    inv_etas = np.empty(J + 1)
+    thr = np.empty(J + 1)
     etas[0] = H
-    for q in range(1, J + 1):                     # exact halvings: H / 2^q
+    inv_etas[0] = 1.0 / H
+    for q in range(1, J + 1):                     # exact halvings: H / 2^q and 2^q / H
         etas[q] = etas[q - 1] * 0.5
+        inv_etas[q] = inv_etas[q - 1] * 2.0
     for q in range(J + 1):
         thr[q] = T_w * 2.0 ** (-q / gam)
     inv_m0 = 1.0 / m0
