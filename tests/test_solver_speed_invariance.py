@@ -190,16 +190,16 @@ def test_validity_of_a_mutable_scene_is_not_kept():
 
 
 def test_contact_equation_root_is_exact_to_roundoff():
-    """kernel._contact_root (Newton on sqrt(delta) from a series start, a last Newton step on delta) against the root
-    of delta + c delta^1.5 = D and its square root in 50-digit decimal arithmetic (bisection, independent of the
-    kernel), over c = B alpha spanning the structure-dominated (c sqrt(D) << 1, the series start up to 0.01) to the
-    contact-dominated (>> 1) regime, plus 300 random pairs; `_solve_contact` returns the same delta."""
+    """kernel._contact_root (its series in e = c sqrt(D) up to e = 0.01, Newton on sqrt(delta) and a last Newton step
+    on delta above) against the root of delta + c delta^1.5 = D and its square root in 50-digit decimal arithmetic
+    (bisection, independent of the kernel), over c = B alpha spanning the structure-dominated (c sqrt(D) << 1, the
+    series) to the contact-dominated (>> 1) regime, plus 300 random pairs; `_solve_contact` returns the same delta."""
     from decimal import Decimal, getcontext
 
     getcontext().prec = 50
     rng = np.random.default_rng(7)
     pairs = [(D, e) for D in (1e-12, 3e-9, 1e-6, 2e-5, 1e-3)
-             for e in (1e-8, 1e-5, 1e-3, 0.0099, 0.01, 0.0101, 0.1, 1.0, 1.01, 7.0, 1e3, 1e8)]
+             for e in (1e-8, 1e-5, 1e-3, 0.003, 0.006, 0.0099, 0.01, 0.0101, 0.1, 1.0, 1.01, 7.0, 1e3, 1e8)]
     pairs += [(10.0 ** rng.uniform(-13, -2), 10.0 ** rng.uniform(-9, 9)) for _ in range(300)]
     worst_d = worst_s = 0.0
     for D, c_sqrtD in pairs:
