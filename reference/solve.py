@@ -420,7 +420,7 @@ def _immutable(target) -> bool:
 #: measured per mode ~5 s w^-3.5 on f_m, and F_n is up to ~2x the sum over the modes). The count is accepted only
 #: once the first dropped mode is quasi-static, w_{n+1} >= TRUNCATION_QUASI_STATIC (below it the w^-1.5 law does not
 #: hold: a Timoshenko beam's error stayed at 1e-4 over 32-128 modes, w_{n+1} 0.7-2.4, then fell 20x). Calibrated on
-#: random beams seeds 5000-5399 (/work/notes/s7/trunc; docs/reference.md).
+#: random beams seeds 5000-5399 (`python benchmarks/auto_mode_honesty.py`; docs/reference.md).
 TRUNCATION_COHERENCE, TRUNCATION_PER_MODE, TRUNCATION_BLOCKS, TRUNCATION_QUASI_STATIC = 3.0, 2.0, 2, 5.0
 #: plates and models without the residual keep the ratio rule: the error falls per doubling by a ratio trusted only to
 #: 1/TRUNCATION_SAFETY of the ratio observed over the last three counts, at most (theory: (cap, cap below
