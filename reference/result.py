@@ -150,8 +150,15 @@ def build(cls, values: dict[str, Any]):
     solver builds one per call and its __init__ cost ~5 us of a ~100 us solve. Same fields in the same order,
     defaults and default factories as __init__ (a fresh list/dict/array per instance), __post_init__ run;
     unknown names raise TypeError as __init__ would. For hot paths only; `values` must hold what __init__
-    would store (no conversion happens other than __post_init__'s)."""
+    would store (no conversion happens other than __post_init__'s). A `values` that names every field, in any
+    order, becomes the instance's __dict__ itself (pass a fresh dict: the reference solver's result, ~2 us less)."""
     plain, factories, required, post = _TEMPLATES.get(cls) or _template(cls)
+    if len(values) == len(plain) and values.keys() == plain.keys():
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "__dict__", values)
+        if post is not None:
+            post(obj)
+        return obj
     d = plain.copy()
     d.update(values)
     if len(d) != len(plain):

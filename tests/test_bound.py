@@ -157,6 +157,18 @@ def test_automatic_mode_count_is_honest_on_random_beams():
             _check_honest(r.metrics, r.uncertainty, truth, f"seed {5000 + seed}, tol {tol:g}")
 
 
+@pytest.mark.parametrize("seed", [5168, 5180, 5185, 5303])
+def test_automatic_mode_count_is_honest_where_dropped_modes_cancel(seed):
+    """The four random beams of seeds 5000-5399 whose reported uncertainty was below the real error until round 7
+    (1.19-1.92x): the difference between two counts nearly vanished while the modes beyond them did not (seed 5168:
+    modes 7-12 cancel in f_m, mode 13 alone moves it 4.6e-5), or the first dropped mode was still dynamic (5180, a
+    Timoshenko beam). Both tolerances, time step + truncation against 8x the modes (32x Timoshenko)."""
+    scene, _, _ = random_scene(np.random.default_rng(seed), kinds=("beam",), clamped_timoshenko=False)
+    for tol in (1e-4, 1e-6):
+        r = impactval.solve(scene, tol=tol)
+        _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), f"seed {seed}, tol {tol:g}")
+
+
 def test_residual_flexibility_does_not_blur_the_end_of_contact():
     """A soft plate with a large residual flexibility (found by the random check): the contact end was located on
     delta = gap - R alpha delta^1.5, which is not smooth there, and t_m carried an error of order (smallest
@@ -175,20 +187,23 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 
 
 #: catalogue and tests' scenes whose reported uncertainty at tol 1e-6 is more than 10x the real error (measured
-#: ratio x 1.5; docs/reference.md): automatic-mode beams whose time-step uncertainty (Richardson before the asymptotic
-#: range) or truncation estimate is loose. Asserted honest and not looser than this. Round 6 re-measured them with
-#: its unresolved-mode table (denser grid: the old one reported up to 1.87x less than the real error of single modes
-#: off its grid) and the binned quadrature sum of the modes' terms; round 5's guards in brackets: al_cantilever_glass
-#: 11.2 (22), cantilever_titanium 16.7 (23; the ratio moves with the chosen step: 6.9 with the table alone),
-#: heavy_wc_slender 11.2 (28), rand_wc_on_steel_cantilever 13.0 (was within 10x: 9.0), steel_cc_pmma_ball 28.7 (43),
-#: stubby_steel 13.3 (15); heavy_ball_slender_beam 9.0 (18) is now held to 10x.
-TEN_X_MISSES = {"al_cantilever_glass": 17, "cantilever_titanium": 25, "heavy_wc_slender": 17,
-                "rand_wc_on_steel_cantilever": 20, "steel_cc_pmma_ball": 43, "stubby_steel": 20}
+#: ratio x 1.5; docs/reference.md). Asserted honest and not looser than this. Round 7 (the truncation estimate from
+#: the dropped modes' dynamic part, honest on random beams where the observed-ratio rule was not) made the automatic
+#: mode count's truncation estimate looser on most of them; measured now (round 6 in brackets): beam_cantilever_tip
+#: 10.4 (7.4), beam_ss_stubby_timoshenko 15.5 (2.4), heavy_ball_slender_beam 24.2 (9.0), al_cantilever_glass 17.0
+#: (11.2), cantilever_titanium 24.3 (16.7), glass_on_pmma 16.1 (8.6), heavy_wc_slender 12.3 (11.2),
+#: heavy_wc_slender_timoshenko 14.2 (1.6), rand_glass_on_pmma_ss 11.7 (8.5), rand_wc_on_pmma_cc 19.4 (6.5),
+#: rand_wc_on_steel_cantilever 15.0 (13.0), steel_cc_pmma_ball 23.4 (28.7), stubby_steel 10.9 (13.3),
+#: stubby_steel_timoshenko 12.3 (5.9), ti_ss_steel_heavy 35.7 (5.2). LOOSER than round 6's guards, said so openly.
+TEN_X_MISSES = {"beam_cantilever_tip": 16, "beam_ss_stubby_timoshenko": 23, "heavy_ball_slender_beam": 36,
+                "al_cantilever_glass": 26, "cantilever_titanium": 36, "glass_on_pmma": 24, "heavy_wc_slender": 19,
+                "heavy_wc_slender_timoshenko": 21, "rand_glass_on_pmma_ss": 18, "rand_wc_on_pmma_cc": 29,
+                "rand_wc_on_steel_cantilever": 23, "steel_cc_pmma_ball": 35, "stubby_steel": 17,
+                "stubby_steel_timoshenko": 19, "ti_ss_steel_heavy": 54}
 #: tests/unseen scenes measured within 10x at tol 1e-6 (catalogue scenes not in TEN_X_MISSES are held to 10x, and so
 #: are catalogue scenes added later; scenes added to tests/unseen later are checked for honesty only until measured
 #: and listed here or above)
-WITHIN_10X = ("cc_aluminium_0p3", "glass_on_pmma", "heavy_wc_slender_timoshenko", "rand_glass_on_pmma_ss",
-              "rand_wc_on_pmma_cc", "stubby_steel_timoshenko", "ti_ss_steel_heavy")
+WITHIN_10X = ("cc_aluminium_0p3",)
 _TEST_DIR = CATALOGUE_DIR.parents[1] / "tests"
 _SCENES = sorted(p.stem for p in CATALOGUE_DIR.glob("*.toml")) + \
     [str(p) for p in sorted((_TEST_DIR / "unseen").glob("*.toml"))]

@@ -146,6 +146,12 @@ def test_build_makes_what_init_makes():
     with pytest.raises(TypeError, match="needs field 'delta_m'"):
         build(Metrics, {"t_m": 1.0, "f_m": 1.0})
     assert build(Metrics, {"t_m": 1.0, "f_m": 2.0, "delta_m": 3.0}) == Metrics(1.0, 2.0, 3.0)
+    # a dict naming every field (in another order) is taken as it is, __post_init__ still run
+    full = {f.name: getattr(made, f.name) for f in reversed(dataclasses.fields(ImpactResult))}
+    full["status"] = "ok"
+    taken = build(ImpactResult, full)
+    assert vars(taken) is full and taken.status is Status.OK
+    assert all(getattr(taken, n) is getattr(made, n) for n in vars(made) if n != "status")
 
 
 def test_per_scene_caches_follow_the_scene():
@@ -167,6 +173,34 @@ def test_per_scene_caches_follow_the_scene():
     c = dataclasses.replace(a, ball=dataclasses.replace(a.ball, material=weak))
     warn_a, warn_c, warn_a2 = (hertz_validity(s, ra.f_m, ra.delta_m) for s in (a, c, a))
     assert any("weak" in w for w in warn_c) and not any("weak" in w for w in warn_a) and warn_a == warn_a2
+
+
+def test_solve_plans_follow_the_scene_and_the_arguments():
+    """solve()'s per-scene plans (kernel arguments kept per scene object, tol, window and mode count): every argument
+    combination solves as a fresh scene does, in any order, and a scene with a mutable part is planned afresh each
+    call (its ball made heavier in place changes the answer)."""
+    import dataclasses
+
+    a = impactval.load_scene("beam_ss_midspan")
+    calls = [(1e-6, 0.0, 40), (1e-4, 0.0, 40), (1e-6, 0.0, 20), (1e-6, 2e-4, 40), (1e-6, 0.0, 40)]
+    got = [impactval.solve(a, tol=t, window=w, modes=n) for t, w, n in calls]
+    for (t, w, n), r in zip(calls, got):
+        fresh = impactval.solve(dataclasses.replace(a, name=a.name), tol=t, window=w, modes=n)
+        assert (r.t_m, r.f_m, r.delta_m, r.n_steps, r.modes) == (fresh.t_m, fresh.f_m, fresh.delta_m, fresh.n_steps,
+                                                                  fresh.modes)
+        assert r.uncertainty == fresh.uncertainty and len(r.contacts) == len(fresh.contacts)
+    assert got[0].t_m != got[2].t_m and got[0].n_steps != got[1].n_steps and len(got[3].t) > len(got[0].t)
+
+    class Ball:                                   # a plain (mutable) object as the ball: no plan may be kept
+        radius, material, velocity, mass = a.ball.radius, a.ball.material, a.ball.velocity, a.ball.mass
+
+    ball = Ball()
+    s = dataclasses.replace(a, ball=ball)
+    light = impactval.solve(s, tol=1e-6, modes=40)
+    assert light.t_m == got[0].t_m
+    ball.mass *= 4.0
+    heavy = impactval.solve(s, tol=1e-6, modes=40)
+    assert heavy.t_m > 1.2 * light.t_m
 
 
 def test_validity_of_a_mutable_scene_is_not_kept():

@@ -1,0 +1,53 @@
+"""How honest and how tight the automatic mode count's reported uncertainty (time step + truncation) is on random
+beams (issue 17 item 5; docs/reference.md, "Modal truncation").
+
+Random beams of the tests' generator (tests/test_bound.py `random_scene(kinds=("beam",), clamped_timoshenko=False)`:
+three supports, both theories, six materials, balls 1-50 mm at 0.01-10 m/s), seeds LO..HI, each solved with
+`impactval.solve` at tol 1e-4 and 1e-6 and compared with the same scene at 8x the modes (32x Timoshenko) + residual
+at tol 1e-11 (`_truth_auto`). Prints the solves, how many have a real error above the reported uncertainty (each
+listed), and reported / real (max over t_m, f_m, delta_m): median, 90th percentile, share above 10x.
+
+Measured at round 7: seeds 5000-5399 (calibration) 0 of 749 above, median 14.1, 90th 44, 69 % above 10x; 8000-8199
+(held out) 0 of 369, median 13.3, 90th 42, 67 %. Round 6's ratio rule had 4 (1.19-1.92x) and 3 (1.12-4.51x).
+
+Run: python benchmarks/auto_mode_honesty.py [LO HI]     (seeds 5000-5400: about 20 min on one core)
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import impactval
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from test_bound import _truth_auto, random_scene  # noqa: E402
+
+
+def main(lo: int, hi: int) -> None:
+    ratios, misses = [], []
+    for seed in range(lo, hi):
+        scene, _, _ = random_scene(np.random.default_rng(seed), kinds=("beam",), clamped_timoshenko=False)
+        for tol in (1e-4, 1e-6):
+            try:
+                r = impactval.solve(scene, tol=tol)
+                truth = _truth_auto(scene, r.modes)
+            except impactval.ImpactvalError:       # refused: a structure far softer than the contact
+                continue
+            m, u = r.metrics, r.uncertainty
+            real = max(abs(m.t_m / truth.t_m - 1), abs(m.f_m / truth.f_m - 1), abs(m.delta_m / truth.delta_m - 1))
+            reported = max(u.t_m / m.t_m, u.f_m / m.f_m, u.delta_m / m.delta_m)
+            ratios.append(reported / real)
+            if real > reported:
+                misses.append((seed, tol, r.modes, real / reported))
+    q = np.array(ratios)
+    print(f"seeds {lo}-{hi - 1}: {len(q)} solves, {len(misses)} above the reported uncertainty; reported / real: "
+          f"median {np.median(q):.1f}, 90th percentile {np.percentile(q, 90):.0f}, above 10x {np.mean(q > 10):.0%}")
+    for seed, tol, modes, x in misses:
+        print(f"  seed {seed}, tol {tol:g}, {modes} modes: real error {x:.2f}x the reported")
+
+
+if __name__ == "__main__":
+    args = [int(a) for a in sys.argv[1:3]] or [5000, 5400]
+    main(*args)
