@@ -169,6 +169,17 @@ def test_automatic_mode_count_is_honest_where_dropped_modes_cancel(seed):
         _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), f"seed {seed}, tol {tol:g}")
 
 
+@pytest.mark.parametrize("seed", [9021, 9055])
+def test_automatic_mode_count_is_honest_on_plates_hit_near_a_nodal_line(seed):
+    """Random plates whose reported uncertainty was below the real error with the observed-ratio rule (until round 7):
+    seed 9055 (impact at y = 0.5008 of the width: modes 3-4 all but still there, the count stopped at 4 modes, 40x
+    at tol 1e-6) and 9021 (2.4x at tol 1e-4). Both tolerances, time step + truncation against 8x the modes."""
+    scene, _, _ = random_scene(np.random.default_rng(seed), kinds=("plate",))
+    for tol in (1e-4, 1e-6):
+        r = impactval.solve(scene, tol=tol)
+        _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), f"seed {seed}, tol {tol:g}")
+
+
 def test_residual_flexibility_does_not_blur_the_end_of_contact():
     """A soft plate with a large residual flexibility (found by the random check): the contact end was located on
     delta = gap - R alpha delta^1.5, which is not smooth there, and t_m carried an error of order (smallest
@@ -195,11 +206,13 @@ def test_residual_flexibility_does_not_blur_the_end_of_contact():
 #: heavy_wc_slender_timoshenko 14.2 (1.6), rand_glass_on_pmma_ss 11.7 (8.5), rand_wc_on_pmma_cc 19.4 (6.5),
 #: rand_wc_on_steel_cantilever 15.0 (13.0), steel_cc_pmma_ball 23.4 (28.7), stubby_steel 10.9 (13.3),
 #: stubby_steel_timoshenko 12.3 (5.9), ti_ss_steel_heavy 35.7 (5.2). LOOSER than round 6's guards, said so openly.
+#: The same rule for plates (round 7; the observed-ratio rule was below the real error on 12 of 115 random plates, up
+#: to 40x): plate_ss_rectangular 13.5 (1.8).
 TEN_X_MISSES = {"beam_cantilever_tip": 16, "beam_ss_stubby_timoshenko": 23, "heavy_ball_slender_beam": 36,
                 "al_cantilever_glass": 26, "cantilever_titanium": 36, "glass_on_pmma": 24, "heavy_wc_slender": 19,
                 "heavy_wc_slender_timoshenko": 21, "rand_glass_on_pmma_ss": 18, "rand_wc_on_pmma_cc": 29,
                 "rand_wc_on_steel_cantilever": 23, "steel_cc_pmma_ball": 35, "stubby_steel": 17,
-                "stubby_steel_timoshenko": 19, "ti_ss_steel_heavy": 54}
+                "stubby_steel_timoshenko": 19, "ti_ss_steel_heavy": 54, "plate_ss_rectangular": 20}
 #: tests/unseen scenes measured within 10x at tol 1e-6 (catalogue scenes not in TEN_X_MISSES are held to 10x, and so
 #: are catalogue scenes added later; scenes added to tests/unseen later are checked for honesty only until measured
 #: and listed here or above)
