@@ -8,6 +8,8 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import impactval
 from impactval.reference import kernel
@@ -61,17 +63,46 @@ def test_moment_tables_match_the_exact_series(together):
         assert np.allclose(S[0], Ki[0].sum(axis=1), rtol=1e-14, atol=0)
 
 
-def test_moment_levels_are_the_halved_steps():
-    """Level j of a table set for base step H equals level 0 of the set for H / 2^j (bit for bit)."""
+def test_moment_levels_depend_on_their_step_and_the_finest_step():
+    """Level j of a table set for base step H with J levels equals level j + k of the set for 2^k H with J + k levels
+    (the same step and the same finest step: e^{i omega eta} is taken by cos/sin on the same levels, counted from the
+    finest, and by angle doubling on the others), bit for bit: the fine run's tables (4H, J + 2 levels, from level 2)
+    are those of a set for H alone (`integrate`)."""
     rng = np.random.default_rng(17)
     omega = np.sort(rng.uniform(1e2, 1e6, 50))
     g = rng.uniform(0.1, 1.0, 50)
     H = 3e-5
-    full = kernel.moments(omega, g, H, 6, P_DEGREE)
-    for j in range(7):
-        single = kernel.moments(omega, g, H / 2.0**j, 0, P_DEGREE)
-        for a, b in zip(full, single):
-            assert np.array_equal(a[j], b[0])
+    for J in (0, 1, 4, 6):
+        alone = kernel.moments(omega, g, H, J, P_DEGREE)
+        for k in (1, 2, 3):
+            shared = kernel.moments(omega, g, H * 2.0**k, J + k, P_DEGREE)
+            for a, b in zip(alone, shared):
+                assert np.array_equal(a, b[k:])
+
+
+@pytest.mark.parametrize("ascending", [True, False])
+def test_doubled_levels_match_the_exact_series(ascending):
+    """Every level of a multi-level table set (e^{i omega eta} by angle doubling on two levels of three; each branch
+    over its own modes when the modes ascend, both over all modes otherwise) against the exact series in rationals,
+    as the single-level sets above: K_l to 4e-15 of its magnitude, e^{i omega eta} to 1e-15 of math.cos/sin of the same
+    phase (the roundoff of two doublings in a row: 6.9e-16 measured on 4,160 frequencies)."""
+    p = P_DEGREE
+    order = np.argsort(THETAS) if ascending else np.arange(len(THETAS))[::-1]
+    base = np.array(THETAS)[order]
+    g = np.linspace(0.5, 2.0, len(base))
+    for J in (1, 2, 3, 5):
+        Er, Ei, Kr, Ki, S = kernel.moments(base, g, 2.0**J, J, p)     # the finest level J has eta = 1
+        for j in range(J + 1):
+            eta = 2.0**(J - j)
+            for i, th0 in enumerate(base):
+                th = th0 * eta
+                assert abs(Er[j, i] - math.cos(th)) <= 1e-15 and abs(Ei[j, i] - math.sin(th)) <= 1e-15, (J, j, th)
+                for l in range(p + 1):
+                    re, im = _exact_moment(th, l, terms=int(80 + 3 * th))
+                    mag = math.hypot(re, im)
+                    assert abs(Kr[j, l, i] / (g[i] * eta) - re) <= 4e-15 * mag, (J, j, th, l)
+                    assert abs(Ki[j, l, i] / (g[i] * eta) - im) <= 4e-15 * mag, (J, j, th, l)
+            assert np.allclose(S[j], Ki[j].sum(axis=1), rtol=1e-14, atol=0)
 
 
 def test_fused_sweep_equals_the_generic_sweep():
@@ -354,3 +385,49 @@ def test_dense_peak_from_the_runs_kept_state_equals_the_sweep_from_touch(name):
                                  P_DEGREE, pk)
         assert kept == pytest.approx(full, rel=1e-13, abs=0.0)
         assert full >= np.max(d[:end]) * (1 - 1e-15)      # the dense peak is never below the largest node
+
+
+def _bisection_reference(s_w, omega, sqrt_w, row, H, theta_tab, c_tab, target):
+    """kernel.largest_step as it was before its walk (c540574): bisection in log H on `unresolved`'s plain sum (a
+    binary search of the table per mode), the sum evaluated again at H before the first eighth."""
+    def plain(h):
+        return kernel.unresolved(s_w, omega, sqrt_w, row, h, theta_tab, c_tab, True)
+    if plain(H) <= target:
+        return H
+    lo = H
+    while plain(lo) > target and lo > 1e-30:
+        lo *= 0.125
+    hi = H
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        if plain(mid) > target:
+            hi = mid
+        else:
+            lo = mid
+        if hi / lo < 1.0 + 1e-3:
+            break
+    return lo
+
+
+@settings(max_examples=150, deadline=None)
+@given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), shuffle=st.booleans(),
+       share=st.floats(1e-9, 1e-2))
+def test_largest_step_is_the_bisection_on_the_plain_sum(n, seed, shuffle, share):
+    """The plain sum by a walk over the table (`_plain_sum`) is `unresolved`'s plain sum bit for bit, for modes in
+    ascending order (the usual: the walk moves a point or two) and shuffled (it walks down too), with phases below,
+    inside and above the table and both coupling rows; and largest_step returns exactly the bisection it replaced."""
+    from impactval.reference.solve import UNRESOLVED_C, UNRESOLVED_THETA
+    rng = np.random.default_rng(seed)
+    omega = np.sort(10.0 ** rng.uniform(2, 7, n))
+    if shuffle:
+        rng.shuffle(omega)
+    s_w = 10.0 ** rng.uniform(-6, 1, n)
+    sqrt_w = np.sqrt(10.0 ** rng.uniform(0, 3, n))
+    row = rng.integers(0, UNRESOLVED_C.shape[0], n)
+    for H in (1e-8, 1e-6, 1e-5, 1e-4, 1e-3):
+        here = kernel._plain_sum(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C)
+        there = kernel.unresolved(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C, True)
+        assert here == there, (H, here, there)
+    target = share * kernel.unresolved(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, True)
+    got = kernel.largest_step(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
+    assert got == _bisection_reference(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
