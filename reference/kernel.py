@@ -43,33 +43,45 @@ _SERIES_EPS = 1e-18
 
 
 @njit(cache=True)
-def _series_coeffs(p: int, theta_max: float, ser_re: np.ndarray, ser_im: np.ndarray):
-    """Horner coefficients (in theta^2) of the series K_p = sum_m (i theta)^m c_m, c_m = p!/(p+m+1)!, for
-    |theta| <= theta_max (<= 2): ser_re[k] = (-1)^k c_2k (real part), ser_im[k] = (-1)^k c_(2k+1) (imaginary part
-    / theta), each part's terms kept down to _SERIES_EPS of its first at theta_max. Returns (n_re, n_im)."""
+def _series_tables(p: int, ser_re: np.ndarray, ser_im: np.ndarray, inv_m: np.ndarray) -> None:
+    """Horner coefficients (in theta^2) of the series K_p = sum_m (i theta)^m c_m, c_m = p!/(p+m+1)! (c_0 = 1/(p+1),
+    c_m = c_(m-1)/(p+m+1)), 48 each: ser_re[k] = (-1)^k c_2k (real part), ser_im[k] = (-1)^k c_(2k+1) (imaginary part
+    / theta); and inv_m[m] = 1/(p + m + 1). Once per table set; `_series_length` gives a level's lengths."""
     cm = 1.0 / (p + 1)
-    lead_re = cm
-    lead_im = cm / (p + 2) * theta_max
-    mag = cm                          # c_m theta_max^m
+    for m in range(2 * ser_re.shape[0]):
+        sign = 1.0 if (m // 2) % 2 == 0 else -1.0
+        if m % 2 == 0:
+            ser_re[m // 2] = sign * cm
+        else:
+            ser_im[m // 2] = sign * cm
+        inv_m[m] = 1.0 / (p + m + 1)
+        cm = cm / (p + m + 2)
+
+
+@njit(cache=True)
+def _series_length(p: int, theta_max: float, inv_m: np.ndarray, n_max: int):
+    """(n_re, n_im): how many terms of `_series_tables`' ser_re, ser_im the series keeps for |theta| <= theta_max
+    (<= 2): each part's terms down to _SERIES_EPS of its first at theta_max (the term that first falls below is kept
+    too). The magnitudes c_m theta_max^m come by multiplications with the reciprocals inv_m (a division each cost its
+    latency on ~20 terms per table level)."""
+    lead_re = inv_m[0]
+    lead_im = inv_m[0] / (p + 2) * theta_max
+    mag = inv_m[0]                    # c_m theta_max^m
     n_re = 0
     n_im = 0
     done_re = False
     done_im = False
     m = 0
-    while m < 2 * ser_re.shape[0] - 1 and not (done_re and done_im):
-        sign = 1.0 if (m // 2) % 2 == 0 else -1.0
+    while m < 2 * n_max - 1 and not (done_re and done_im):
         if m % 2 == 0:
             if not done_re:
-                ser_re[n_re] = sign * cm
                 n_re += 1
                 done_re = mag <= _SERIES_EPS * lead_re
         elif not done_im:
-            ser_im[n_im] = sign * cm
             n_im += 1
             done_im = mag <= _SERIES_EPS * lead_im
         m += 1
-        cm = cm / (p + m + 1)
-        mag = mag * theta_max / (p + m + 1)
+        mag = mag * theta_max * inv_m[m]
     return n_re, n_im
 
 
@@ -160,7 +172,7 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
     With theta = omega eta and K_l = int_0^1 e^{i theta (1 - s)} s^l ds (the table is g eta K_l):
     |theta| >= 2: upward recurrence K_l = (l K_{l-1} - 1)/(i theta) from K_0 = (e^{i theta} - 1)/(i theta)
     (error growth <= p!/theta^p); |theta| < 2: the series of K_p, sum_m (i theta)^m p!/(p+m+1)! (Horner in
-    theta^2, `_series_coeffs`), then the downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there. Both
+    theta^2, `_series_tables`), then the downward recurrence K_{l-1} = (1 + i theta K_l)/l, stable there. Both
     branches run in loops the compiler vectorises. With the modes in ascending |omega| (the usual order) the modes of
     a level that take the series are a prefix: each branch then runs over its own modes only. Else both run over all
     modes of a level (arguments clamped so that the branch not taken stays finite) and each mode takes its own; a
@@ -179,6 +191,8 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
         inv_l[l] = 1.0 / l
     ser_re = np.zeros(48)
     ser_im = np.zeros(48)
+    inv_m = np.empty(96)
+    _series_tables(p, ser_re, ser_im, inv_m)
     theta = np.empty(n)
     x = np.empty(n)
     inv_t = np.empty(n)
@@ -204,27 +218,37 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
                 s = Ei[j + 1, i]
                 Er[j, i] = (c - s) * (c + s)
                 Ei[j, i] = 2.0 * s * c
+    n_small = 0                      # how many modes take the series (ascending: never fewer on a finer level)
     for j in range(J + 1):
         eta = H / 2.0**j
         t_small = 0.0                # the largest |theta| < 2 of the level: the series length
         t_min = np.inf               # the smallest and largest |theta|: which branches the level needs
         t_max = 0.0
-        n_small = 0                  # how many modes take the series
+        if not ascending:
+            n_small = 0
         for i in range(n):
-            th = omega[i] * eta
-            theta[i] = th
+            theta[i] = omega[i] * eta
             w[i] = g[i] * eta
-            a = abs(th)
-            if a < 2.0:
+        if ascending and n > 0:      # |theta| ascends: the ends, and the series modes a prefix
+            t_min = abs(theta[0])
+            t_max = abs(theta[n - 1])
+            while n_small < n and abs(theta[n_small]) < 2.0:
                 n_small += 1
-                if a > t_small:
-                    t_small = a
-            t_min = min(t_min, a)
-            t_max = max(t_max, a)
+            if n_small > 0:
+                t_small = abs(theta[n_small - 1])
+        else:
+            for i in range(n):
+                a = abs(theta[i])
+                if a < 2.0:
+                    n_small += 1
+                    if a > t_small:
+                        t_small = a
+                t_min = min(t_min, a)
+                t_max = max(t_max, a)
         series = t_min < 2.0         # some mode takes the series branch
         upward = t_max >= 2.0        # some mode takes the upward recurrence
         if series:
-            n_re, n_im = _series_coeffs(p, t_small, ser_re, ser_im)
+            n_re, n_im = _series_length(p, t_small, inv_m, ser_re.shape[0])
         if not upward:               # a series-only level (the finer ones)
             _series_part(theta, x, w, sr, si, ser_re, ser_im, n_re, n_im, inv_l, Kr, Ki, S, j, p, 0, n)
             continue
