@@ -539,34 +539,19 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     """
     n = ew.shape[0]
     gam = (p - 0.5) / (p + 1.0)
-    # one buffer for the node series (returned as its rows) and one for the small work arrays (an allocation each
-    # cost ~30-50 ns, 19 of them a run)
-    q1 = p + 1
-    work = np.zeros(2 * n + 7 * q1 + 1 + 2 * (J + 1))
-    yr = work[:n]
-    yi = work[n:2 * n]
-    o = 2 * n
-    sig = work[o:o + q1]
-    Pw = work[o + q1:o + 2 * q1 + 1]
-    o += 2 * q1 + 1
-    a_known = work[o:o + q1]
-    c = work[o + q1:o + 2 * q1]
-    coef = work[o + 2 * q1:o + 3 * q1]            # the step's force polynomial, new node included
-    inv1 = work[o + 3 * q1:o + 4 * q1]            # 1/(l+1): ball velocity weights
-    inv2 = work[o + 4 * q1:o + 5 * q1]            # 1/((l+1)(l+2)): ball displacement weights
-    o += 5 * q1
-    etas = work[o:o + J + 1]
-    thr = work[o + J + 1:o + 2 * (J + 1)]
+    yr = np.zeros(n)
+    yi = np.zeros(n)
     d_top = 0.0                       # the first contact's largest delta so far (for peak_state)
     first_open = True                 # the first contact has not ended yet
-    series = np.empty((6, max_nodes))
-    ta = series[0]
-    da = series[1]
-    fa = series[2]
-    xa = series[3]
-    ua = series[4]
-    ea = series[5]
+    ta = np.empty(max_nodes)
+    da = np.empty(max_nodes)
+    fa = np.empty(max_nodes)
+    xa = np.empty(max_nodes)
+    ua = np.empty(max_nodes)
+    ea = np.empty(max_nodes)
     flags = np.zeros(max_nodes, dtype=np.int8)
+    sig = np.empty(p + 1)
+    Pw = np.empty(p + 2)
     glev = np.zeros(max(p, 1), dtype=np.int64)    # levels of the last accepted steps, the newest first
     # a stencil is keyed by its step levels (6 bits each, relative to the new step's): up to degree 10, 31 levels
     keyed = p <= 10 and J + 1 <= 32
@@ -574,8 +559,13 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
         cache = stencil_cache(p)
     else:
         cache = stencils
+    a_known = np.empty(p + 1)
+    c = np.empty(p + 1)
+    coef = np.zeros(p + 1)            # the step's force polynomial, new node included
     free_jt = -1                      # table level at which free_acc = sum_i Im(E_i y_i) holds for the current y
     free_acc = 0.0
+    inv1 = np.empty(p + 1)            # 1/(l+1): ball velocity weights
+    inv2 = np.empty(p + 1)            # 1/((l+1)(l+2)): ball displacement weights
     for l in range(p + 1):
         inv1[l] = 1.0 / (l + 1)
         inv2[l] = 1.0 / ((l + 1) * (l + 2))
@@ -599,6 +589,8 @@ def run(ew, m0, alpha, v0, R, H, J, p, T_w, window, Er, Ei, Kr, Ki, S, max_nodes
     seg_start = 0
     j_prev = J
     t_end = -1.0
+    etas = np.empty(J + 1)
+    thr = np.empty(J + 1)
     etas[0] = H
     for q in range(1, J + 1):                     # exact halvings: H / 2^q
         etas[q] = etas[q - 1] * 0.5
@@ -1152,8 +1144,8 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
     coarse = _dense_contacts(tc, dc, fc, xc, uc, flc, cnt_c, Er, Ei, Kr, Ki, ew, 1, 2.0 * H, R, alpha, m0, p, pk_c)
     coarsest = _dense_contacts(tcc, dcc, fcc, xcc, ucc, flcc, cnt_cc, Er, Ei, Kr, Ki, ew, 0, 4.0 * H, R, alpha, m0, p,
                                pk_cc)
-    # views of the fine run's series, not copies (the caller packs or copies them: 7 allocations less)
-    return STATUS_OK, cnt, t[:cnt], d[:cnt], f[:cnt], x[:cnt], u[:cnt], e[:cnt], fl[:cnt], fine, coarse, coarsest
+    return (STATUS_OK, cnt, t[:cnt].copy(), d[:cnt].copy(), f[:cnt].copy(), x[:cnt].copy(), u[:cnt].copy(),
+            e[:cnt].copy(), fl[:cnt].copy(), fine, coarse, coarsest)
 
 
 @njit(cache=True)
