@@ -219,6 +219,8 @@ def moments(omega: np.ndarray, g: np.ndarray, H: float, J: int, p: int):
                 Er[j, i] = (c - s) * (c + s)
                 Ei[j, i] = 2.0 * s * c
     n_small = 0                      # how many modes take the series (ascending: never fewer on a finer level)
+    n_re = 1                         # the series lengths of a level that has series modes
+    n_im = 1
     for j in range(J + 1):
         eta = H / 2.0**j
         t_small = 0.0                # the largest |theta| < 2 of the level: the series length
@@ -1238,15 +1240,40 @@ def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
         for i in range(omega.shape[0]):
             total += s_w[i] * _factor(omega[i] * H, sqrt_w[i], theta_tab, c_tab, row[i])
         return total
-    nb = theta_tab.shape[0] + 1
+    nt = theta_tab.shape[0]
+    nb = nt + 1
     sums = np.zeros(nb)
+    k = 1                            # the table point of the previous mode (`_plain_sum`'s walk)
     for i in range(omega.shape[0]):
         th = omega[i] * H
-        sums[_bin(th, theta_tab)] += s_w[i] * _factor(th, sqrt_w[i], theta_tab, c_tab, row[i])
+        # `_bin` and `_factor` of th with one walk instead of two binary searches (the same bin and value)
+        if th <= theta_tab[0]:
+            x = th / theta_tab[0]
+            x2 = x * x
+            sums[0] += s_w[i] * (c_tab[row[i], 0] * x2 * x2 * x2)
+        else:
+            k = _walk(theta_tab, th, k)
+            if k < nt:
+                c = c_tab[row[i], k]
+            else:
+                c = max(c_tab[row[i], nt - 1], 0.25 * c_tab[row[i], nt - 1] * sqrt_w[i])
+            sums[k] += s_w[i] * c
     total = 0.0
     for k in range(nb):
         total += sums[k] * sums[k]
     return np.sqrt(total)
+
+
+@njit(cache=True, inline="always")
+def _walk(theta_tab: np.ndarray, theta: float, k: int) -> int:
+    """The first table point >= theta (theta > theta_tab[0]: 1 .. len(theta_tab), as np.searchsorted), walked from the
+    previous mode's point k: up while the point is below theta, down while the one before is not."""
+    nt = theta_tab.shape[0]
+    while k < nt and theta_tab[k] < theta:
+        k += 1
+    while k > 1 and theta_tab[k - 1] >= theta:
+        k -= 1
+    return k
 
 
 @njit(cache=True)
@@ -1254,8 +1281,8 @@ def _plain_sum(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
                theta_tab: np.ndarray, c_tab: np.ndarray) -> float:
     """`unresolved`'s plain sum (`plain_sum` True), the same terms added in the same order, with each mode's table
     point found by a walk from the previous mode's instead of a binary search: the modes come in ascending frequency
-    (a walk of a point or two), and the walk is exact in any order (it steps down as well as up). 0.5x the cost of the
-    search on the worked beam's 160 modes."""
+    (a walk of a point or two), and the walk is exact in any order (it steps down as well as up). `largest_step` on the
+    worked beam's 160 modes: 7.5 -> 2.8 us."""
     nt = theta_tab.shape[0]
     t0 = theta_tab[0]
     last = nt - 1
@@ -1269,10 +1296,7 @@ def _plain_sum(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
             x2 = x * x
             c = c_tab[r, 0] * x2 * x2 * x2
         else:
-            while k < nt and theta_tab[k] < theta:
-                k += 1
-            while k > 1 and theta_tab[k - 1] >= theta:
-                k -= 1
+            k = _walk(theta_tab, theta, k)
             if k < nt:
                 c = c_tab[r, k]
             else:

@@ -413,9 +413,10 @@ def _bisection_reference(s_w, omega, sqrt_w, row, H, theta_tab, c_tab, target):
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), shuffle=st.booleans(),
        share=st.floats(1e-9, 1e-2))
 def test_largest_step_is_the_bisection_on_the_plain_sum(n, seed, shuffle, share):
-    """The plain sum by a walk over the table (`_plain_sum`) is `unresolved`'s plain sum bit for bit, for modes in
-    ascending order (the usual: the walk moves a point or two) and shuffled (it walks down too), with phases below,
-    inside and above the table and both coupling rows; and largest_step returns exactly the bisection it replaced."""
+    """The plain sum by a walk over the table (`_plain_sum`) is `unresolved`'s plain sum bit for bit, and the reported
+    binned sum (its own walk) the one from `_bin` and `_factor`'s binary searches, for modes in ascending order (the
+    usual: the walk moves a point or two) and shuffled (it walks down too), with phases below, inside and above the
+    table and both coupling rows; and largest_step returns exactly the bisection it replaced."""
     from impactval.reference.solve import UNRESOLVED_C, UNRESOLVED_THETA
     rng = np.random.default_rng(seed)
     omega = np.sort(10.0 ** rng.uniform(2, 7, n))
@@ -428,6 +429,14 @@ def test_largest_step_is_the_bisection_on_the_plain_sum(n, seed, shuffle, share)
         here = kernel._plain_sum(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C)
         there = kernel.unresolved(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C, True)
         assert here == there, (H, here, there)
+        # the reported binned sum (its walk) against the binary searches of `_bin` and `_factor`, term by term
+        sums = np.zeros(len(UNRESOLVED_THETA) + 1)
+        for i in range(n):
+            th = omega[i] * H
+            sums[kernel._bin(th, UNRESOLVED_THETA)] += s_w[i] * kernel._factor(th, sqrt_w[i], UNRESOLVED_THETA,
+                                                                                UNRESOLVED_C, row[i])
+        binned = math.sqrt(sum(x * x for x in sums))
+        assert kernel.unresolved(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C) == binned, H
     target = share * kernel.unresolved(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, True)
     got = kernel.largest_step(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
     assert got == _bisection_reference(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
