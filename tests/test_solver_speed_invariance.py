@@ -106,8 +106,9 @@ def test_doubled_levels_match_the_exact_series(ascending):
 
 
 def test_fused_sweep_equals_the_generic_sweep():
-    """The degree-5 sweep (one pass over the modes) and the generic per-degree sweep give the same new modal state,
-    energy and next free displacement to roundoff (and the degree-5 sweep the new structure displacement)."""
+    """The degree-5 sweep (one pass over the modes, from one state buffer into another) and the generic per-degree sweep
+    (in place) give the same new modal state, energy and next free displacement to roundoff (and the degree-5 sweep the
+    new structure displacement), and the degree-5 sweep leaves the state it swept from as it was."""
     rng = np.random.default_rng(5)
     n = 37                                   # not a multiple of the vector width
     omega = rng.uniform(1e3, 1e6, n)
@@ -117,9 +118,10 @@ def test_fused_sweep_equals_the_generic_sweep():
     coef = rng.normal(size=P_DEGREE + 1) * 1e3
     for jt in range(4):
         y0r, y0i = rng.normal(size=n) * 1e-6, rng.normal(size=n) * 1e-6
-        ar, ai = y0r.copy(), y0i.copy()
+        ar, ai = np.zeros(n), np.zeros(n)
         br, bi = y0r.copy(), y0i.copy()
-        e6, nxt6, ysum6 = kernel._sweep6(Er, Ei, Kr, Ki, jt, coef, ar, ai, ew)
+        e6, nxt6, ysum6 = kernel._sweep6(Er, Ei, Kr, Ki, jt, coef, y0r, y0i, ar, ai, ew)
+        assert np.array_equal(y0r, br) and np.array_equal(y0i, bi)       # the state swept from is left as it was
         eg, nxtg = kernel._sweep(Er, Ei, Kr, Ki, jt, coef, br, bi, ew, P_DEGREE)
         # independent: complex arithmetic in numpy
         y = (Er[jt] + 1j * Ei[jt]) * (y0r + 1j * y0i) + ((Kr[jt] + 1j * Ki[jt]) * coef[:, None]).sum(axis=0)
