@@ -1323,7 +1323,7 @@ def _plain_sum(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
     """`unresolved`'s plain sum (`plain_sum` True), the same terms added in the same order, with each mode's table
     point found by a walk from the previous mode's instead of a binary search: the modes come in ascending frequency
     (a walk of a point or two), and the walk is exact in any order (it steps down as well as up). `largest_step` on the
-    worked beam's 160 modes: 7.5 -> 2.8 us."""
+    worked beam's 160 modes: 7.5 -> 2.4 us."""
     nt = theta_tab.shape[0]
     t0 = theta_tab[0]
     last = nt - 1
