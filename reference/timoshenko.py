@@ -402,14 +402,17 @@ def _atom_gram(expo: np.ndarray, rates: np.ndarray, L: float) -> np.ndarray:
 TAIL_NEGLIGIBLE = 1e-18
 #: candidate passes per sign searched for max |W| above the cut-off (3 suffice; one spare for near ties)
 PASSES = 4
+#: grid points per pi of wave phase in the windows and passes searched for max |W| (then Newton from several
+#: starts ranked by a parabola through three points)
+WINDOW_PER_PI = 16
 
 
 def _window_peaks(sec: Section, om, c, q, lo: np.ndarray, hi: np.ndarray, rate: np.ndarray) -> np.ndarray:
-    """max |W| over the union of intervals [lo, hi] (n, J) per mode: 16 grid points per pi of phase at `rate`
+    """max |W| over the union of intervals [lo, hi] (n, J) per mode: WINDOW_PER_PI grid points per pi of phase at `rate`
     [1/m] (n,) over the widest interval, then Newton; modes in chunks of <= 2e5 grid points."""
     n, J = lo.shape
     width = np.max(hi - lo, axis=1)
-    m_need = np.ceil(16.0 * rate * width / math.pi).astype(int) + 17
+    m_need = np.ceil(WINDOW_PER_PI * rate * width / math.pi).astype(int) + 17
     out = np.empty(n)
     order = np.argsort(m_need, kind="stable")
     start = 0
