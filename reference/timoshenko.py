@@ -349,8 +349,10 @@ def _atoms(sec: Section, om: np.ndarray, c: np.ndarray):
     a, k = np.sqrt(np.abs(a2)), np.sqrt(k2)
     expo = a2 * sec.length**2 > 1.0
     gk = (q - k2) / k
-    g = (a2 + q) / a
+    safe_a = np.where(a > 0, a, 1.0)           # a = 0 only at the cut-off, a mode these atoms are not used for
+    g = (a2 + q) / safe_a
     c0, c1, c2, c3 = c.T
+    a = safe_a
     w = np.stack([c0, np.where(expo, c1, c1 * a2 / a), c2, c3], axis=1)
     p = np.stack([np.where(expo, g * c0, (a2 + q) * c1), np.where(expo, -g * c1, (a2 + q) * c0 / a),
                   -gk * c3, gk * c2], axis=1)
