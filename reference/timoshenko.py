@@ -434,21 +434,25 @@ def _window_peaks(sec: Section, om, c, q, lo: np.ndarray, hi: np.ndarray, rate: 
 def _pass_windows(k1, k2, p1, p2, L: float, block: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (n, 2 PASSES): for W = R1 cos(k1 x - p1) + R2 cos(k2 x - p2) (k1 <= k2), the PASSES passes
     |k1 x - p1 - s - 2 pi j| <= pi (s = 0 for max W, pi for min W) whose centres x_j have the other wave's phase
-    k2 x_j - p2 - s closest to 0 (mod 2 pi), cut to [0, L]. One multiply-and-round per pass (blocks of modes)."""
+    k2 x_j - p2 - s closest to 0 (mod 2 pi), cut to [0, L]. In turns, that phase is alpha j + beta (alpha =
+    k2/k1): one multiply-add and round per pass (blocks of modes)."""
     n = len(k1)
     lo, hi = np.empty((n, 2 * PASSES)), np.empty((n, 2 * PASSES))
-    for b in range(0, n, block):
-        sl = slice(b, b + block)
-        kk1, kk2, pp1, pp2 = k1[sl, None], k2[sl, None], p1[sl, None], p2[sl, None]
-        j = np.arange(-1, int(np.max(np.ceil(kk1 * L / (2 * math.pi)))) + 2)
-        half = math.pi / kk1
-        for col, shift in ((0, 0.0), (PASSES, math.pi)):
-            xj = (pp1 + shift + 2 * math.pi * j) / kk1
-            nu = (kk2 * xj - pp2 - shift) / (2 * math.pi)
+    alpha = k2 / k1
+    for col, shift in ((0, 0.0), (PASSES, math.pi)):
+        # passes whose centre is within half a pass of the span: j_first .. j_first + count - 1
+        first = np.ceil((-math.pi - p1 - shift) / (2 * math.pi))
+        count = (np.floor(((L * k1 + math.pi) - p1 - shift) / (2 * math.pi)) - first + 1).astype(int)
+        beta = (alpha * (p1 + shift + 2 * math.pi * first) - p2 - shift) / (2 * math.pi)
+        for b in range(0, n, block):
+            sl = slice(b, b + block)
+            t = np.arange(int(count[sl].max()))
+            nu = alpha[sl, None] * t + beta[sl, None]
             nu = np.abs(nu - np.round(nu))
-            nu[(xj + half < 0) | (xj - half > L)] = np.inf
+            nu[t >= count[sl, None]] = np.inf
             best = np.argpartition(nu, PASSES - 1, axis=1)[:, :PASSES]
-            xb = np.take_along_axis(xj, best, axis=1)
+            xb = (p1[sl, None] + shift + 2 * math.pi * (first[sl, None] + best)) / k1[sl, None]
+            half = math.pi / k1[sl, None]
             lo[sl, col:col + PASSES] = np.clip(xb - half, 0.0, L)
             hi[sl, col:col + PASSES] = np.clip(xb + half, 0.0, L)
     return lo, hi
