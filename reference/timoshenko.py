@@ -250,10 +250,54 @@ def clamped_frequencies(sec: Section, support: str, n: int) -> np.ndarray:
         om = _grid(sec, hi)
         f = frequency_function(sec, support, om)
         idx = np.flatnonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)
-        if len(idx) >= n:
-            idx = idx[:n]
-            return _bisect(sec, support, om[idx], om[idx + 1], f[idx])
+        lo, up, f_lo = om[idx], om[idx + 1], f[idx]
+        extra = _close_pairs(sec, support, om, f)
+        if len(extra[0]):
+            lo, up, f_lo = (np.concatenate([u, v]) for u, v in zip((lo, up, f_lo), extra))
+            order = np.argsort(lo, kind="stable")
+            lo, up, f_lo = lo[order], up[order], f_lo[order]
+        if len(lo) >= n:
+            return _bisect(sec, support, lo[:n], up[:n], f_lo[:n])
         hi *= 1.5
+
+
+
+
+def _close_pairs(sec: Section, support: str, om: np.ndarray, f: np.ndarray, points: int = 17, levels: int = 12):
+    """Brackets (lo, hi, f(lo)) of pairs of roots closer than the grid spacing, which the grid's sign changes
+    miss: two roots in one cell leave a local minimum of |f| with one sign on both sides (its depth is no guide:
+    a pair 3.4e-5 apart left 0.58 of the smaller neighbour). Each such minimum's two cells are resampled
+    (`points`) and, while no sign change shows, zoomed about the smallest |f| (8x per level, `levels` levels:
+    pairs down to ~1e-13 of the cell apart). ~0.2 % of the grid points are such minima: ~+20 % grid cost.
+    Seed 5017 of the random Timoshenko beams: a pair 1.8e-4 apart (relative) at 1.82e6 rad/s was missed at 4096
+    modes (found at 8192), and every higher mode shifted by two."""
+    a = np.abs(f)
+    s = np.sign(f[:-1]) * np.sign(f[1:]) < 0
+    i = np.arange(1, len(f) - 1)
+    dip = (a[i] <= a[i - 1]) & (a[i] <= a[i + 1]) & ~s[i - 1] & ~s[i]
+    i = i[dip]
+    out_lo, out_hi, out_f = [], [], []
+    lo, hi = om[i - 1], om[i + 1]
+    t = np.linspace(0.0, 1.0, points)
+    for _ in range(levels):
+        if not len(lo):
+            break
+        x = lo[:, None] + (hi - lo)[:, None] * t
+        fx = frequency_function(sec, support, x.ravel()).reshape(x.shape)
+        ch = np.sign(fx[:, :-1]) * np.sign(fx[:, 1:]) < 0
+        found = ch.any(axis=1)
+        r, c = np.nonzero(ch & found[:, None])
+        out_lo.append(x[r, c])
+        out_hi.append(x[r, c + 1])
+        out_f.append(fx[r, c])
+        keep = ~found
+        x, fx = x[keep], fx[keep]
+        j = np.clip(np.argmin(np.abs(fx), axis=1), 1, points - 2)
+        rows = np.arange(len(x))
+        lo, hi = x[rows, j - 1], x[rows, j + 1]
+    if not out_lo:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return np.concatenate(out_lo), np.concatenate(out_hi), np.concatenate(out_f)
 
 
 def _gauss(L: float, panels: int, order: int = 10) -> tuple[np.ndarray, np.ndarray]:
