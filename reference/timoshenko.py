@@ -478,8 +478,8 @@ def _window_peaks(sec: Section, om, c, q, lo: np.ndarray, hi: np.ndarray, rate: 
 def _pass_windows(k1, k2, p1, p2, L: float, block: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (n, 2 PASSES): for W = R1 cos(k1 x - p1) + R2 cos(k2 x - p2) (k1 <= k2), the PASSES passes
     |k1 x - p1 - s - 2 pi j| <= pi (s = 0 for max W, pi for min W) whose centres x_j have the other wave's phase
-    k2 x_j - p2 - s closest to 0 (mod 2 pi), cut to [0, L]. In turns, that phase is alpha j + beta (alpha =
-    k2/k1): one multiply-add and round per pass (blocks of modes)."""
+    k2 x_j - p2 - s closest to 0 (mod 2 pi), cut to [0, L]. In turns that phase is alpha j + beta (alpha = k2/k1),
+    and the passes with the smallest |alpha j + beta mod 1| are found in O(sqrt(passes)) per mode (`_nearest_turns`)."""
     n = len(k1)
     lo, hi = np.empty((n, 2 * PASSES)), np.empty((n, 2 * PASSES))
     alpha = k2 / k1
@@ -488,18 +488,53 @@ def _pass_windows(k1, k2, p1, p2, L: float, block: int = 256) -> tuple[np.ndarra
         first = np.ceil((-math.pi - p1 - shift) / (2 * math.pi))
         count = (np.floor(((L * k1 + math.pi) - p1 - shift) / (2 * math.pi)) - first + 1).astype(int)
         beta = (alpha * (p1 + shift + 2 * math.pi * first) - p2 - shift) / (2 * math.pi)
+        order = np.argsort(count, kind="stable")              # blocks of similar pass counts
         for b in range(0, n, block):
-            sl = slice(b, b + block)
-            t = np.arange(int(count[sl].max()))
-            nu = alpha[sl, None] * t + beta[sl, None]
-            nu = np.abs(nu - np.round(nu))
-            nu[t >= count[sl, None]] = np.inf
-            best = np.argpartition(nu, PASSES - 1, axis=1)[:, :PASSES]
+            sl = order[b:b + block]
+            best = _nearest_turns(alpha[sl], beta[sl], count[sl], PASSES)
             xb = (p1[sl, None] + shift + 2 * math.pi * (first[sl, None] + best)) / k1[sl, None]
             half = math.pi / k1[sl, None]
             lo[sl, col:col + PASSES] = np.clip(xb - half, 0.0, L)
             hi[sl, col:col + PASSES] = np.clip(xb + half, 0.0, L)
     return lo, hi
+
+
+def _turn_distance(alpha, beta, t):
+    """|alpha t + beta| to the nearest whole number (alpha, beta (n, 1), t (n, m))."""
+    v = alpha * t + beta
+    return np.abs(v - np.round(v))
+
+
+def _nearest_turns(alpha: np.ndarray, beta: np.ndarray, count: np.ndarray, k: int) -> np.ndarray:
+    """(n, k): the k indices t in [0, count) with the smallest distance of alpha t + beta to a whole number,
+    by baby steps s < B and giant steps t = s + B g (B ~ sqrt(count)): for each giant step the k nearest are among
+    the k baby steps on either side of where frac(alpha s) meets -frac(alpha B g + beta) in sorted order; the last,
+    partial giant step is read whole. O(sqrt(count)) per mode instead of O(count)."""
+    a, b = alpha[:, None], beta[:, None]
+    B = max(int(math.ceil(math.sqrt(int(count.max())))), 2 * k)
+    s = np.arange(B)
+    baby = a * s - np.floor(a * s)                            # frac(alpha s) in [0, 1)
+    sort = np.argsort(baby, axis=1)
+    baby_sorted = np.take_along_axis(baby, sort, axis=1)
+    full = count // B                                         # whole giant steps per mode
+    g = np.arange(int(full.max()) + 1)
+    target = -(a * (B * g) + b)
+    target -= np.floor(target)                                # frac(alpha s) closest to this is best
+    shelf = 2.0 * np.arange(len(alpha))[:, None]               # one sorted array for all modes: row r in [2r, 2r + 1)
+    pos = np.searchsorted((baby_sorted + shelf).ravel(), (target + shelf).ravel()).reshape(target.shape)
+    pos -= B * np.arange(len(alpha))[:, None]
+    off = np.arange(-k, k)
+    cand_pos = (pos[:, :, None] + off) % B                    # (n, G, 2k), circular
+    rows = np.arange(len(alpha))[:, None, None]
+    cand = sort[rows, cand_pos] + B * g[None, :, None]        # indices t
+    cand = cand.reshape(len(alpha), -1)
+    valid = g[None, :, None].repeat(2 * k, axis=2).reshape(1, -1) < full[:, None]
+    last = B * full[:, None] + s                              # the partial giant step, read whole
+    cand = np.concatenate([np.where(valid, cand, 0), last], axis=1)
+    ok = np.concatenate([valid, last < count[:, None]], axis=1)
+    d = np.where(ok, _turn_distance(a, b, cand), np.inf)
+    pick = np.argpartition(d, k - 1, axis=1)[:, :k]
+    return np.take_along_axis(cand, pick, axis=1)
 
 
 def _clamped_shapes(sec: Section, support: str, om: np.ndarray, impact_x: float) -> tuple[np.ndarray, np.ndarray]:
@@ -518,8 +553,7 @@ def _clamped_shapes(sec: Section, support: str, om: np.ndarray, impact_x: float)
       of the other wave's phase offset nu_j = k2 x_j - p2 (mod 2 pi) at the pass centre alone (the same line on
       the torus, shifted), decreasing in |nu_j| for k1 <= k2 (a pass cut by an end is lower still), so only the
       PASSES passes of smallest |nu_j| per sign, and the two ends, are searched (grid + Newton from several
-      starts). Choosing them reads one multiply-and-round per pass, no trigonometry: O(n) per mode but ~1e3x
-      cheaper than the grid, a small part of the time up to 4096 modes;
+      starts). Choosing them takes O(sqrt(passes)) multiply-and-rounds per mode (`_nearest_turns`);
     - low modes, tail windows covering the span, |a| L <= 1 or fewer than 8 passes: the whole-span grid with 16
       Newton starts (a bounded number of modes).
     The whole-span grid with one start (`_clamped_shapes_grid`, the previous method) reads max |W| up to 1e-3 low

@@ -125,3 +125,16 @@ def test_close_root_pairs_are_not_missed():
         f = tim.frequency_function(sec, "clamped-clamped", grid)
         dense = np.sum(np.sign(f[:-1]) * np.sign(f[1:]) < 0)
         assert dense >= 2 and np.sum((many > lo) & (many < hi)) == dense
+
+
+def test_nearest_turns_against_brute_force():
+    """The baby-step/giant-step choice of beat passes equals reading every pass."""
+    rng = np.random.default_rng(7)
+    count = rng.integers(8, 5000, 300)
+    alpha, beta = rng.uniform(1.0, 8.0, 300), rng.uniform(-4.0, 4.0, 300)
+    got = tim._nearest_turns(alpha, beta, count, tim.PASSES)
+    for i in range(300):
+        t = np.arange(count[i])
+        want = np.sort(tim._turn_distance(alpha[i], beta[i], t))[:tim.PASSES]
+        assert len(set(got[i])) == tim.PASSES and np.all((got[i] >= 0) & (got[i] < count[i]))
+        assert np.allclose(np.sort(tim._turn_distance(alpha[i], beta[i], got[i])), want, rtol=0, atol=1e-15)
