@@ -14,7 +14,8 @@ cut-off frequency omega_c = sqrt(kappa G A / (rho I)) and oscillatory (a^2 < 0) 
 - clamped-clamped and cantilever (clamped at x = 0, free at x = L): the 4x4 boundary determinant, in a basis
   that is bounded at every frequency (exponentially scaled hyperbolic functions above a L = 1, the regular pair
   cosh(a x), a sinh(a x) below it and across the cut-off) with signs matched between the bases, so that every
-  sign change of the scaled determinant is a root; a grid of 32 points per pi of wave phase brackets the roots,
+  sign change of the scaled determinant is a root; a grid of 32 points per pi of wave phase brackets the roots
+  (pairs closer than a grid cell, where the two spectra veer, by zooming into |det|'s minima: `_close_pairs`),
   a vectorised bisection refines them to machine precision.
 
 Shapes are normalised to max |W| = 1 over the span; modal mass = int (rho A W^2 + rho I Psi^2) dx (closed form:
