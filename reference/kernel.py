@@ -1347,22 +1347,32 @@ def _plain_sum(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
 
 
 @njit(cache=True)
+def _step_sum(s_w, omega, sqrt_w, row, H: float, theta_tab, c_tab, binary_search=None) -> float:
+    """largest_step's plain sum: `_plain_sum`'s walk, or with `binary_search` given `unresolved`'s (the same value;
+    None is pruned at compile time)."""
+    if binary_search is None:
+        return _plain_sum(s_w, omega, sqrt_w, row, H, theta_tab, c_tab)
+    return unresolved(s_w, omega, sqrt_w, row, H, theta_tab, c_tab, True)
+
+
+@njit(cache=True)
 def largest_step(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.ndarray, H: float, theta_tab,
-                 c_tab, target: float) -> float:
+                 c_tab, target: float, binary_search=None) -> float:
     """The largest base step <= H whose plain sum of unresolved-mode terms is <= target (bisection in log H): the first
     base step of solve_auto. The plain sum (not the reported binned quadrature sum) starts where the Richardson part of
     the estimate is likely to pass too: started from the smaller quadrature sum, the first estimate failed more often
     and the retry cost a second set of runs (the 160-mode worked beam at tol 1e-6: 245 against 130 us). The sum is
-    `_plain_sum` (the same value as `unresolved`'s, found faster)."""
-    if _plain_sum(s_w, omega, sqrt_w, row, H, theta_tab, c_tab) <= target:
+    `_plain_sum` (the same value as `unresolved`'s, found faster); with `binary_search` given (any value: tests only),
+    `unresolved`'s own plain sum, a binary search of the table per mode (largest_step until round 8)."""
+    if _step_sum(s_w, omega, sqrt_w, row, H, theta_tab, c_tab, binary_search) <= target:
         return H
     lo = H * 0.125 if H > 1e-30 else H      # the sum at H is above target (just checked)
-    while _plain_sum(s_w, omega, sqrt_w, row, lo, theta_tab, c_tab) > target and lo > 1e-30:
+    while _step_sum(s_w, omega, sqrt_w, row, lo, theta_tab, c_tab, binary_search) > target and lo > 1e-30:
         lo *= 0.125
     hi = H
     for _ in range(60):
         mid = np.sqrt(lo * hi)
-        if _plain_sum(s_w, omega, sqrt_w, row, mid, theta_tab, c_tab) > target:
+        if _step_sum(s_w, omega, sqrt_w, row, mid, theta_tab, c_tab, binary_search) > target:
             hi = mid
         else:
             lo = mid

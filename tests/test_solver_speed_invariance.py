@@ -389,28 +389,6 @@ def test_dense_peak_from_the_runs_kept_state_equals_the_sweep_from_touch(name):
         assert full >= np.max(d[:end]) * (1 - 1e-15)      # the dense peak is never below the largest node
 
 
-def _bisection_reference(s_w, omega, sqrt_w, row, H, theta_tab, c_tab, target):
-    """kernel.largest_step as it was before its walk (c540574): bisection in log H on `unresolved`'s plain sum (a
-    binary search of the table per mode), the sum evaluated again at H before the first eighth."""
-    def plain(h):
-        return kernel.unresolved(s_w, omega, sqrt_w, row, h, theta_tab, c_tab, True)
-    if plain(H) <= target:
-        return H
-    lo = H
-    while plain(lo) > target and lo > 1e-30:
-        lo *= 0.125
-    hi = H
-    for _ in range(60):
-        mid = math.sqrt(lo * hi)
-        if plain(mid) > target:
-            hi = mid
-        else:
-            lo = mid
-        if hi / lo < 1.0 + 1e-3:
-            break
-    return lo
-
-
 @settings(max_examples=150, deadline=None)
 @given(n=st.integers(1, 60), seed=st.integers(0, 2**32 - 1), shuffle=st.booleans(),
        share=st.floats(1e-9, 1e-2))
@@ -418,7 +396,8 @@ def test_largest_step_is_the_bisection_on_the_plain_sum(n, seed, shuffle, share)
     """The plain sum by a walk over the table (`_plain_sum`) is `unresolved`'s plain sum bit for bit, and the reported
     binned sum (its own walk) the one from `_bin` and `_factor`'s binary searches, for modes in ascending order (the
     usual: the walk moves a point or two) and shuffled (it walks down too), with phases below, inside and above the
-    table and both coupling rows; and largest_step returns exactly the bisection it replaced."""
+    table and both coupling rows; and largest_step on the walk returns exactly its result on `unresolved`'s
+    binary-search sum (round 7's step)."""
     from impactval.reference.solve import UNRESOLVED_C, UNRESOLVED_THETA
     rng = np.random.default_rng(seed)
     omega = np.sort(10.0 ** rng.uniform(2, 7, n))
@@ -441,4 +420,4 @@ def test_largest_step_is_the_bisection_on_the_plain_sum(n, seed, shuffle, share)
         assert kernel.unresolved(s_w, omega, sqrt_w, row, H, UNRESOLVED_THETA, UNRESOLVED_C) == binned, H
     target = share * kernel.unresolved(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, True)
     got = kernel.largest_step(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
-    assert got == _bisection_reference(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target)
+    assert got == kernel.largest_step(s_w, omega, sqrt_w, row, 1e-4, UNRESOLVED_THETA, UNRESOLVED_C, target, True)
