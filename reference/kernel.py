@@ -1035,7 +1035,8 @@ def dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, p
     for the same force; the degree-6 interpolant of the sub-step values around the largest gives the peak.
     t, d, f, x, u: the run's nodes (time [s], delta [m], force [N], ball displacement [m] and velocity [m/s]) up
     to `end` (the node ending the first contact); tables at level j + j0 for step H / 2^j and energy weights ew, as in
-    `run` (the sweep is `run`'s own). With the run's `peak_state` (see `run`) the sweep starts at the node before the largest one."""
+    `run` (the sweep is `run`'s own). With the run's `peak_state` (see `run`) the sweep starts at the node before the
+    largest one."""
     n = Er.shape[1]
     nlev = Er.shape[0]
     ybuf = np.zeros((2, 2, n))       # the modal state, swept from one buffer into the other (see `_sweep6`)

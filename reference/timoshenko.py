@@ -21,8 +21,9 @@ cut-off frequency omega_c = sqrt(kappa G A / (rho I)) and oscillatory (a^2 < 0) 
 Shapes are normalised to max |W| = 1 over the span; modal mass = int (rho A W^2 + rho I Psi^2) dx (closed form:
 W and Psi are combinations of four exponentials/sinusoids); phi = W at the impact point. max |W| is found in O(1)
 work per mode (`_clamped_shapes`): the exact sinusoid amplitude between the ends' tails below the cut-off, a few
-chosen passes of the two-wave beat above it. The static flexibility at the impact point (bending + shear, by Castigliano/Menabrea on the
-statically indeterminate beam) is exact and feeds the residual (mode-acceleration) correction.
+chosen passes of the two-wave beat above it. The static flexibility at the impact point (bending + shear, by
+Castigliano/Menabrea on the statically indeterminate beam) is exact and feeds the residual (mode-acceleration)
+correction.
 """
 from __future__ import annotations
 
