@@ -1235,16 +1235,24 @@ def richardson(x_h: float, x_2h: float, x_4h: float, est_order: float) -> float:
 
 @njit(cache=True)
 def _factor(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray, r: int) -> float:
-    """`unresolved_factor` with row r of a 2-D table (no row view per call)."""
+    """`unresolved_factor` with row r of a 2-D table (no row view per call): `_term` from the exact table point."""
+    return _term(theta, sqrt_w, theta_tab, c_tab, r, max(np.searchsorted(theta_tab, theta), 1))[1]
+
+
+@njit(cache=True, inline="always")
+def _term(theta: float, sqrt_w: float, theta_tab: np.ndarray, c_tab: np.ndarray, r: int, k: int):
+    """(bin, factor) of one mode at phase theta with row r of the table: the bin as `_bin` (0 below the table, k for
+    theta in (theta_tab[k-1], theta_tab[k]], len(theta_tab) above) and the factor as `unresolved_factor`. The first
+    table point >= theta is walked from k (1 .. len(theta_tab): the previous mode's bin, or the exact point)."""
     nt = theta_tab.shape[0]
     if theta <= theta_tab[0]:
         x = theta / theta_tab[0]
         x2 = x * x
-        return c_tab[r, 0] * x2 * x2 * x2
-    k = np.searchsorted(theta_tab, theta)      # the first point >= theta
+        return 0, c_tab[r, 0] * x2 * x2 * x2
+    k = _walk(theta_tab, theta, k)
     if k < nt:
-        return c_tab[r, k]
-    return max(c_tab[r, nt - 1], 0.25 * c_tab[r, nt - 1] * sqrt_w)
+        return k, c_tab[r, k]
+    return k, max(c_tab[r, nt - 1], 0.25 * c_tab[r, nt - 1] * sqrt_w)
 
 
 @njit(cache=True)
@@ -1287,19 +1295,11 @@ def unresolved(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
     sums = np.zeros(nb)
     k = 1                            # the table point of the previous mode (`_plain_sum`'s walk)
     for i in range(omega.shape[0]):
-        th = omega[i] * H
-        # `_bin` and `_factor` of th with one walk instead of two binary searches (the same bin and value)
-        if th <= theta_tab[0]:
-            x = th / theta_tab[0]
-            x2 = x * x
-            sums[0] += s_w[i] * (c_tab[row[i], 0] * x2 * x2 * x2)
-        else:
-            k = _walk(theta_tab, th, k)
-            if k < nt:
-                c = c_tab[row[i], k]
-            else:
-                c = max(c_tab[row[i], nt - 1], 0.25 * c_tab[row[i], nt - 1] * sqrt_w[i])
-            sums[k] += s_w[i] * c
+        # `_bin` and `_factor` with one walk instead of two binary searches (the same bin and value)
+        b, c = _term(omega[i] * H, sqrt_w[i], theta_tab, c_tab, row[i], k)
+        if b > 0:
+            k = b
+        sums[b] += s_w[i] * c
     total = 0.0
     for k in range(nb):
         total += sums[k] * sums[k]
@@ -1325,24 +1325,12 @@ def _plain_sum(s_w: np.ndarray, omega: np.ndarray, sqrt_w: np.ndarray, row: np.n
     point found by a walk from the previous mode's instead of a binary search: the modes come in ascending frequency
     (a walk of a point or two), and the walk is exact in any order (it steps down as well as up). `largest_step` on the
     worked beam's 160 modes: 7.5 -> 2.4 us."""
-    nt = theta_tab.shape[0]
-    t0 = theta_tab[0]
-    last = nt - 1
     total = 0.0
     k = 1                                   # the first point >= theta of the previous mode (1 .. nt)
     for i in range(omega.shape[0]):
-        theta = omega[i] * H
-        r = row[i]
-        if theta <= t0:
-            x = theta / t0
-            x2 = x * x
-            c = c_tab[r, 0] * x2 * x2 * x2
-        else:
-            k = _walk(theta_tab, theta, k)
-            if k < nt:
-                c = c_tab[r, k]
-            else:
-                c = max(c_tab[r, last], 0.25 * c_tab[r, last] * sqrt_w[i])
+        b, c = _term(omega[i] * H, sqrt_w[i], theta_tab, c_tab, row[i], k)
+        if b > 0:
+            k = b
         total += s_w[i] * c
     return total
 
