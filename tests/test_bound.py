@@ -153,6 +153,12 @@ def auto_and_truth(scene, tol: float):
         return None
 
 
+def _check_auto(scene, tol: float, label: str) -> float:
+    """impactval.solve(scene, tol) with the automatic mode count, checked against `_truth_auto` (`_check_honest`)."""
+    r = impactval.solve(scene, tol=tol)
+    return _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), label)
+
+
 @pytest.mark.slow
 def test_automatic_mode_count_is_honest_on_random_beams():
     """Random beams (both theories) with the automatic mode count: time step + truncation bound the real error."""
@@ -172,8 +178,7 @@ def test_automatic_mode_count_is_honest_where_dropped_modes_cancel(seed):
     Timoshenko beam). Both tolerances, time step + truncation against 8x the modes (32x Timoshenko)."""
     scene, _, _ = random_scene(np.random.default_rng(seed), kinds=("beam",), clamped_timoshenko=False)
     for tol in (1e-4, 1e-6):
-        r = impactval.solve(scene, tol=tol)
-        _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), f"seed {seed}, tol {tol:g}")
+        _check_auto(scene, tol, f"seed {seed}, tol {tol:g}")
 
 
 @pytest.mark.parametrize("seed", [9021, 9055])
@@ -183,8 +188,7 @@ def test_automatic_mode_count_is_honest_on_plates_hit_near_a_nodal_line(seed):
     at tol 1e-6) and 9021 (2.4x at tol 1e-4). Both tolerances, time step + truncation against 8x the modes."""
     scene, _, _ = random_scene(np.random.default_rng(seed), kinds=("plate",))
     for tol in (1e-4, 1e-6):
-        r = impactval.solve(scene, tol=tol)
-        _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), f"seed {seed}, tol {tol:g}")
+        _check_auto(scene, tol, f"seed {seed}, tol {tol:g}")
 
 
 def test_residual_flexibility_does_not_blur_the_end_of_contact():
@@ -292,5 +296,4 @@ def test_automatic_mode_count_is_honest_on_a_clamped_timoshenko_beam_with_close_
     uncertainty against a truth that missed them too. Time step + truncation against 32x the modes."""
     scene, _, _ = random_scene(np.random.default_rng(5017), kinds=("beam",), timoshenko=1.0, clamped_timoshenko=True)
     assert scene.target.support == "clamped-clamped" and scene.target.theory == "timoshenko"
-    r = impactval.solve(scene, tol=1e-6)
-    _check_honest(r.metrics, r.uncertainty, _truth_auto(scene, r.modes), "seed 5017, tol 1e-6")
+    _check_auto(scene, 1e-6, "seed 5017, tol 1e-6")
