@@ -178,7 +178,8 @@ def _auto_args(md, m0: float, alpha: float, v0: float, tol: float, light: bool =
             ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW, n0, ref_solve.ESTIMATE_ORDER, ref_solve.UNRESOLVED_THETA,
             ref_solve.UNRESOLVED_C, ref_solve.SMALLEST_STEP_FACTOR, ref_solve.UNRESOLVED_SHARE,
             ref_solve.node_cap(len(omega)), float(kernel.SERIES_SAMPLES))
-    return args + (ref_solve.LIGHT_COUPLING, ref_solve.UNRESOLVED_CLASSES, ref_solve.MIN_STEPS) if light else args
+    return args + (ref_solve.LIGHT_COUPLING, ref_solve.UNRESOLVED_CLASSES, ref_solve.MIN_STEPS,
+                   ref_solve.SMALLEST_STEP_C) if light else args
 
 
 def wrapper_share(base, res, t_solve: dict[str, float]) -> None:

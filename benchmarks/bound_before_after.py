@@ -71,7 +71,7 @@ def main(rev: str = "35bdafc", rounds: int = 10) -> None:
                 float(kernel.SERIES_SAMPLES), ref_solve.LIGHT_COUPLING)
         calls = {"before": (old.solve_auto, common + (consts["UNRESOLVED_THETA"], consts["UNRESOLVED_C"]) + tail),
                  "now": (kernel.solve_auto, common + (ref_solve.UNRESOLVED_THETA, ref_solve.UNRESOLVED_C) + tail
-                         + (ref_solve.UNRESOLVED_CLASSES, ref_solve.MIN_STEPS))}
+                         + (ref_solve.UNRESOLVED_CLASSES, ref_solve.MIN_STEPS, ref_solve.SMALLEST_STEP_C))}
         best = {(who, c): np.inf for who in calls for c in CLOCKS}
         rows = {}
         for who, (fn, args) in calls.items():

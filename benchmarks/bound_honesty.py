@@ -12,7 +12,12 @@ Measured at round 6 (docs/reference.md): seeds 0-3999 0 of 11,448 above, 4000-79
 1e-4), 8000-11999 0 of 11,476; single modes 0 of 4,046, clusters 0 of 3,106. Seeds 0-3999 were used to set the
 estimate's rules; the others are held out.
 
-Run: python benchmarks/bound_honesty.py [LO HI] [--modes]     (seeds 0-4000: about 1 min on one core)
+3. With --smallest (instead of 1): the error of the smallest steps at touch and separation (SMALLEST_STEP_C): the
+   largest constant where it converges at order 2.5 and the solves whose smallest-step error is above the
+   uncertainty without that term, and with it.
+
+Run: python benchmarks/bound_honesty.py [LO HI] [--modes] [--smallest]     (seeds 0-4000: about 1 min on one core;
+--smallest: about 1 min per 300 seeds)
 """
 from __future__ import annotations
 
@@ -25,6 +30,8 @@ import numpy as np
 import impactval
 from impactval.reference.beams import Modes
 from impactval.reference.hertz import plate_impact
+from impactval.reference import kernel
+from impactval.reference import solve as ref_solve
 from impactval.reference.solve import solve_modes, structure_modes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -71,6 +78,64 @@ def seeds(lo: int, hi: int) -> None:
     print("\n".join(misses))
 
 
+def _fine_at_levels(args: tuple, n: float, J: int) -> np.ndarray:
+    """(t_m, delta_m) of the fine run of `kernel.solve_triple` at base step t_plate / n with J step levels, for the
+    solve whose kernel arguments are `args` (`solve._kernel_args`)."""
+    t_plate = args[9]
+    max_nodes = int(6 * n + 60 * J + 50)
+    while True:
+        out = kernel.solve_triple(args[0], args[1], args[2], args[3], args[4], args[5], args[6], t_plate / n, J,
+                                  ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW * t_plate, max_nodes)
+        if out[0] == kernel.STATUS_OK:
+            fine = out[9]
+            return np.array([fine[0, 1] - fine[0, 0], fine[0, 2]])
+        max_nodes *= 4
+
+
+def smallest_steps(lo: int, hi: int) -> None:
+    """The error of the smallest steps (SMALLEST_STEP_C): at the base step each solve chooses, the fine run with J
+    levels against J + 6 (its smallest step 64x shorter), relative (f_m moves 1.5x delta_m), divided by (eta_min /
+    t_plate)^2.5; the constant is read where that difference converges at order 2.5 (X(J) - X(J+6) is 4-8x X(J+1) -
+    X(J+6)). Also: solves whose difference is above the time-step uncertainty without the term (reported less the
+    SMALLEST_STEP_C term), and above it with the term."""
+    consts, above_without, above_with, total, t0 = {}, [], 0, 0, time.process_time()
+    for seed in range(lo, hi):
+        scene, n, residual = random_scene(np.random.default_rng(seed))
+        try:
+            md = structure_modes(scene, n, residual=residual) if n is not None else structure_modes(scene)
+        except impactval.ImpactvalError:
+            continue
+        m0, alpha, v0 = scene.ball.mass, scene.alpha, scene.ball.velocity
+        for tol in TOLS:
+            try:
+                args = ref_solve._kernel_args(md, m0, alpha, v0, tol, 0.0)
+            except impactval.ImpactvalError:
+                continue
+            out = kernel.solve_auto(*args)
+            if out[0] != kernel.STATUS_OK:
+                continue
+            n_base, rel = float(out[11]), float(out[10])
+            J = kernel.levels(n_base, tol, ref_solve.SMALLEST_STEP_FACTOR)
+            if J + 6 > 30:
+                continue
+            x = [_fine_at_levels(args, n_base, j) for j in (J, J + 1, J + 6)]
+            d0, d1 = (float(np.max(np.abs(x[k] - x[2]) / x[2] * (1.0, 1.5))) for k in (0, 1))
+            eta_rel = 1.0 / n_base / 2.0**J
+            term = ref_solve.SMALLEST_STEP_C * eta_rel**2.5
+            total += 1
+            if d1 > 0 and 4.0 < d0 / d1 < 8.0:
+                kind = scene.target.kind
+                consts[kind] = max(consts.get(kind, 0.0), d0 / eta_rel**2.5)
+            if d0 > rel - term:
+                above_without.append(f"  seed {seed} ({scene.target.kind}) tol {tol:g}: {d0:.2g} > {rel - term:.2g}")
+            above_with += d0 > rel
+    print(f"smallest steps, seeds {lo}-{hi - 1}: {total} solves; largest constant where it converges at order 2.5: "
+          f"{', '.join(f'{k} {v:.0f}' for k, v in sorted(consts.items()))} (SMALLEST_STEP_C {ref_solve.SMALLEST_STEP_C:g}); "
+          f"their error above the uncertainty without the term: {len(above_without)}, with it: {above_with} "
+          f"({time.process_time() - t0:.0f} s CPU)")
+    print("\n".join(above_without))
+
+
 def modes_sweeps() -> None:
     m0, alpha, v0 = 0.0327, 1.5384e10, 1.0
     p = plate_impact(m0, alpha, v0)
@@ -102,6 +167,9 @@ def modes_sweeps() -> None:
 if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     lo, hi = (int(args[0]), int(args[1])) if len(args) >= 2 else (0, 4000)
-    seeds(lo, hi)
+    if "--smallest" in sys.argv:
+        smallest_steps(lo, hi)
+    else:
+        seeds(lo, hi)
     if "--modes" in sys.argv:
         modes_sweeps()

@@ -930,14 +930,15 @@ def _peak_near(ts: np.ndarray, ds: np.ndarray, k: int, lo: int, hi: int, need: i
 
 
 @njit(cache=True)
-def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, f: np.ndarray, R: float) -> np.ndarray:
+def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, f: np.ndarray, R: float, first_peak=True) -> np.ndarray:
     """Contact phases from a run: rows (t_start, t_end, delta_max) [s, s, m]; t_end = NaN if the
     window ended in contact. Start: linear interpolation over the H/2^J step in which free flight
     (integrated exactly) turned into contact; end: root of the cubic through the last four nodes of the
     gap delta + R f (R [m/N]: residual flexibility, f [N]: the force), which changes sign where delta
     does but, unlike delta = gap - R alpha delta^1.5 near separation, is smooth there (interpolating
     delta itself left an error of order (smallest step)^1.5 in t_m); peak: maximum of the degree-6
-    interpolant of delta around the largest node."""
+    interpolant of delta around the largest node. `first_peak` False leaves the first contact's delta_max NaN (for a
+    caller that takes it from `dense_peak`)."""
     n = t.shape[0]
     count = 0
     for k in range(n):
@@ -966,6 +967,8 @@ def contacts(t: np.ndarray, d: np.ndarray, flags: np.ndarray, f: np.ndarray, R: 
                 lo = max(e - 3, s)
                 gap = d[lo:e + 1] + R * f[lo:e + 1]
                 out[row, 1] = crossing(t[lo:e + 1], gap, t[e - 1], t[e])
+            if row == 0 and not first_peak:
+                continue
             pk = s
             for q in range(s, e + 1):
                 if d[q] > d[pk]:
@@ -1195,8 +1198,8 @@ def solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes):
 @njit(cache=True)
 def _dense_contacts(t, d, f, x, u, fl, cnt, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, peak_state=None):
     """`contacts` of one run (its first cnt nodes) with the first contact's delta_max from `dense_peak`."""
-    c = contacts(t[:cnt], d[:cnt], fl[:cnt], f[:cnt], R)
     end = _first_end(fl[:cnt])
+    c = contacts(t[:cnt], d[:cnt], fl[:cnt], f[:cnt], R, end <= 2)
     if end > 2:
         c[0, 2] = dense_peak(t, d, f, x, u, end, Er, Ei, Kr, Ki, ew, j0, H, R, alpha, m0, p, peak_state)
     return c
@@ -1386,10 +1389,39 @@ LIGHT_W = 3.0
 LIGHT_CAP = 0.5
 
 
+#: the smallest steps' error bound may be at most this share of the rest of the estimate (else more step levels)
+SMALLEST_SHARE = 0.1
+
+
+@njit(cache=True)
+def _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, n, node_cap, est_order, s_w, omega_c, sqrt_w, row,
+              theta_tab, c_tab):
+    """`solve_triple` at base step H with J levels (more nodes allowed until it fits the first contact's budget) and
+    the relative estimate of the fine run's error without the smallest steps' term: the Richardson estimate of the
+    three runs (the larger of t_m's and 1.5x delta_m's) plus the unresolved-mode bound."""
+    cap = node_cap // 4             # the first contact: a quarter of a window's budget
+    max_nodes = min(int(6 * n + 60 * J + 50), cap)
+    while True:
+        out = solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, max_nodes)
+        if out[0] == STATUS_OK or max_nodes >= cap:
+            break
+        max_nodes = min(4 * max_nodes, cap)
+    if out[0] != STATUS_OK:
+        return out, np.inf
+    fine, coarse, coarsest = out[9], out[10], out[11]
+    tm_f = fine[0, 1] - fine[0, 0]
+    dm_f = fine[0, 2]
+    # relative; f_m = alpha delta_m^1.5 moves 1.5x as much as delta_m
+    rel_t = richardson(tm_f, coarse[0, 1] - coarse[0, 0], coarsest[0, 1] - coarsest[0, 0], est_order) / tm_f
+    rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
+    return out, max(rel_t, 1.5 * rel_d) + unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab)
+
+
 @njit(cache=True)
 def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate, p, grading, n0,
                est_order, theta_tab, c_tab, smallest_factor, unresolved_share=0.25,
-               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0, class_s=None, min_steps=0.0):
+               node_cap=4000000, series_samples=SERIES_SAMPLES, light_coupling=0.0, class_s=None, min_steps=0.0,
+               smallest_c=0.0):
     """The whole time-step control in one compiled call (see solve.solve_modes for the rules).
 
     Returns (status, n_nodes, t, delta, f, x_ball, u_ball, energy, flags, contacts, rel_uncertainty,
@@ -1431,25 +1463,21 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     for _ in range(12):
         H = t_plate / n
         J = levels(n, tol, smallest_factor)
-        cap = node_cap // 4             # the first contact: a quarter of a window's budget
-        max_nodes = min(int(6 * n + 60 * J + 50), cap)
         while True:
-            out = solve_triple(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, max_nodes)
-            if out[0] == STATUS_OK or max_nodes >= cap:
+            out, core = _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, n, node_cap, est_order,
+                                  s_w, omega_c, sqrt_w, row, theta_tab, c_tab)
+            st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
+            if st != STATUS_OK:
+                return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf
+            # the error of the smallest steps (touch, separation), order 2.5 in the smallest step H / 2^J: it shows in
+            # the three runs' differences at ratio 5.7 only, below the ratio the Richardson estimate trusts, so it is
+            # bounded apart; where it could pass SMALLEST_SHARE of the rest (a base step far shorter than tol needs),
+            # the runs are made again with more levels until it cannot
+            small = smallest_c * (H / 2.0**J / t_plate) ** 2.5
+            if small <= SMALLEST_SHARE * core or J >= 30 or core <= 0.0 or core / tol > 1.0 - SMALLEST_SHARE:
                 break
-            max_nodes = min(4 * max_nodes, cap)
-        st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
-        if st != STATUS_OK:
-            return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf
-        tm_f = fine[0, 1] - fine[0, 0]
-        tm_c = coarse[0, 1] - coarse[0, 0]
-        tm_cc = coarsest[0, 1] - coarsest[0, 0]
-        dm_f = fine[0, 2]
-        # relative; f_m = alpha delta_m^1.5 moves 1.5x as much as delta_m
-        rel_t = richardson(tm_f, tm_c, tm_cc, est_order) / tm_f
-        rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
-        rel = max(rel_t, 1.5 * rel_d)
-        rel += unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab)
+            J = min(30, J + int(np.ceil(np.log(small / (SMALLEST_SHARE * core)) / np.log(2.0**2.5))))
+        rel = core + small
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
             break
