@@ -1391,6 +1391,9 @@ LIGHT_CAP = 0.5
 
 #: the smallest steps' error bound may be at most this share of the rest of the estimate (else more step levels)
 SMALLEST_SHARE = 0.1
+#: a first contact shorter than this fraction of the time scale used so far (t_plate at first) is solved again with
+#: the step rules (min_steps, smallest step, its error bound) taken from its own duration
+SHORT_CONTACT = 0.9
 
 
 @njit(cache=True)
@@ -1460,9 +1463,10 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     if nm > 0:
         n = t_plate / largest_step(s_w, omega_c, sqrt_w, row, t_plate / n, theta_tab, c_tab,
                                      unresolved_share * tol)
-    for _ in range(12):
+    t_ref = t_plate             # the contact's time scale: t_plate, or the first contact's duration once a run found it
+    for _ in range(12):         # shorter (SHORT_CONTACT)
         H = t_plate / n
-        J = levels(n, tol, smallest_factor)
+        J = levels(n * t_ref / t_plate, tol, smallest_factor)
         while True:
             out, core = _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, n, node_cap, est_order,
                                   s_w, omega_c, sqrt_w, row, theta_tab, c_tab)
@@ -1473,10 +1477,18 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
             # the three runs' differences at ratio 5.7 only, below the ratio the Richardson estimate trusts, so it is
             # bounded apart; where it could pass SMALLEST_SHARE of the rest (a base step far shorter than tol needs),
             # the runs are made again with more levels until it cannot
-            small = smallest_c * (H / 2.0**J / t_plate) ** 2.5
+            small = smallest_c * (H / 2.0**J / t_ref) ** 2.5
             if small <= SMALLEST_SHARE * core or J >= 30 or core <= 0.0 or core / tol > 1.0 - SMALLEST_SHARE:
                 break
             J = min(30, J + int(np.ceil(np.log(small / (SMALLEST_SHARE * core)) / np.log(2.0**2.5))))
+        # a contact much shorter than t_plate (a ball on strongly coupled light modes, which move with it like a
+        # lighter target) takes its rules from its own duration: at least min_steps base steps and the smallest step
+        # from it (the smallest steps' error scales with their length relative to the contact)
+        t_contact = out[9][0, 1] - out[9][0, 0]
+        if 0.0 < t_contact < SHORT_CONTACT * t_ref and n < 1e6:
+            t_ref = t_contact
+            n = max(n, min_steps * t_plate / t_ref)
+            continue
         rel = core + small
         ratio = rel / tol
         if ratio <= 1.0 or n > 1e6:
