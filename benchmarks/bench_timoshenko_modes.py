@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import impactval
-from impactval.reference import solve as ref_solve, structure, timoshenko as tim
+from impactval.reference import solve as ref_solve, structure, timoshenko as tim, timoshenko_shapes as tshapes
 from impactval.scenarios.scene import scene_from_dict
 
 
@@ -52,8 +52,8 @@ def shapes(modes, repeat):
             sec = tim.Section.of(_scene(support=support).target)
             x = 0.8 * sec.length
             t_f, om = _cpu(lambda: tim.clamped_frequencies.__wrapped__(sec, support, n), 1)
-            t_old, (mm_old, phi_old) = _cpu(lambda: tim._clamped_shapes_grid(sec, support, om, x), repeat)
-            t_new, (mm_new, phi_new) = _cpu(lambda: tim._clamped_shapes(sec, support, om, x), repeat)
+            t_old, (mm_old, phi_old) = _cpu(lambda: tshapes._clamped_shapes_grid(sec, support, om, x), repeat)
+            t_new, (mm_new, phi_new) = _cpu(lambda: tshapes._clamped_shapes(sec, support, om, x), repeat)
             peak_ratio = phi_new / np.where(phi_old != 0, phi_old, np.nan)      # = old peak / new peak
             mass_diff = np.nanmax(np.abs(mm_new * peak_ratio**-2 / mm_old - 1))  # the integral itself
             g_old, g_new = phi_old**2 / mm_old, phi_new**2 / mm_new
@@ -65,16 +65,16 @@ def shapes(modes, repeat):
 def solve_cold(tol):
     sc = _scene(material="aluminium", ball="tungsten-carbide", radius=0.02, velocity=0.5)
     rows = []
-    for name, fn in (("old shapes", tim._clamped_shapes_grid), ("new shapes", tim._clamped_shapes)):
-        saved = tim._clamped_shapes
-        tim._clamped_shapes = fn
+    for name, fn in (("old shapes", tshapes._clamped_shapes_grid), ("new shapes", tshapes._clamped_shapes)):
+        saved = tshapes._clamped_shapes
+        tshapes._clamped_shapes = fn
         for cached in (tim.timoshenko_modes, tim.clamped_frequencies, ref_solve._beam_modes_cached):
             cached.cache_clear()
         structure._CACHE.clear()
         try:
             t, r = _cpu(lambda: impactval.solve(sc, tol=tol), 1)
         finally:
-            tim._clamped_shapes = saved
+            tshapes._clamped_shapes = saved
         rows.append((name, t, r))
         print(f"solve(tol={tol:g}) slender Timoshenko cantilever, {name}: {t:.2f} s CPU, {r.modes} modes, "
               f"t_m {r.metrics.t_m:.9e} f_m {r.metrics.f_m:.9e} delta_m {r.metrics.delta_m:.9e}")

@@ -1,4 +1,4 @@
-"""Clamped-clamped / cantilever Timoshenko mode shapes in O(1) work per mode (reference/timoshenko.py,
+"""Clamped-clamped / cantilever Timoshenko mode shapes in O(1) work per mode (reference/timoshenko_shapes.py,
 `_clamped_shapes`) against the whole-span grid (`_clamped_shapes_grid`, the previous method), a dense search of
 max |W| and adaptive quadrature of the modal mass."""
 import math
@@ -8,6 +8,7 @@ import pytest
 from scipy.integrate import quad
 
 from impactval.reference import timoshenko as tim
+from impactval.reference import timoshenko_shapes as shapes
 from impactval.scenarios.scene import scene_from_dict
 
 
@@ -60,14 +61,14 @@ def test_fast_shapes_against_the_grid(name, support):
     of the normalisation: what the solver uses) to roundoff, on every mode below and above the cut-off."""
     sec, om, c = _modes(name, support)
     assert np.any(om < sec.cutoff) and np.any(om > sec.cutoff)
-    mass_fast, peak_fast = tim._fast_mass_peak(sec, om, c)
-    mass_grid, peak_grid = tim._grid_mass_peak(sec, om, c)
+    mass_fast, peak_fast = shapes._fast_mass_peak(sec, om, c)
+    mass_grid, peak_grid = shapes._grid_mass_peak(sec, om, c)
     assert np.max(np.abs(mass_fast / mass_grid - 1)) < 1e-12
     # the grid's max is a value of |W| at some point, so the true max is at least it
     assert np.all(peak_fast >= peak_grid * (1 - 1e-13))
     x = 0.37 * sec.length
-    mm_fast, phi_fast = tim._clamped_shapes(sec, support, om, x)
-    mm_grid, phi_grid = tim._clamped_shapes_grid(sec, support, om, x)
+    mm_fast, phi_fast = shapes._clamped_shapes(sec, support, om, x)
+    mm_grid, phi_grid = shapes._clamped_shapes_grid(sec, support, om, x)
     g_fast, g_grid = phi_fast**2 / mm_fast, phi_grid**2 / mm_grid
     assert np.max(np.abs(g_fast - g_grid)) < 1e-11 * np.max(g_grid)
     below = om < sec.cutoff                    # one wave + end tails: the grid (one Newton start) is exact there
@@ -80,8 +81,8 @@ def test_fast_peak_against_a_dense_search(name, support):
     """max |W| to 1e-12 against a dense grid + scipy bounded search, on every 7th mode and on each mode where the
     old grid read it low (above the cut-off, where two waves give many near-equal peaks)."""
     sec, om, c = _modes(name, support)
-    _, peak_fast = tim._fast_mass_peak(sec, om, c)
-    _, peak_grid = tim._grid_mass_peak(sec, om, c)
+    _, peak_fast = shapes._fast_mass_peak(sec, om, c)
+    _, peak_grid = shapes._grid_mass_peak(sec, om, c)
     low = np.flatnonzero(peak_grid < peak_fast * (1 - 1e-12))
     picks = sorted(set(range(0, len(om), 7)) | set(low[:: max(1, len(low) // 25)]))
     dense = np.array([_dense_peak(sec, om[i:i + 1], c[i:i + 1]) for i in picks])
@@ -93,7 +94,7 @@ def test_modal_mass_against_quad(support):
     """int rho A W^2 + rho I Psi^2 dx in closed form against scipy quad (per half wavelength) on modes below,
     near and far above the cut-off of the stubby beam."""
     sec, om, c = _modes("stubby", support)
-    mass, _ = tim._fast_mass_peak(sec, om, c)
+    mass, _ = shapes._fast_mass_peak(sec, om, c)
     rA, rI, L = sec.density * sec.area, sec.density * sec.second_moment, sec.length
     for i in (0, 3, 8, 40, 150, 299):
         o, ci = om[i:i + 1], c[i:i + 1]
@@ -132,9 +133,9 @@ def test_nearest_turns_against_brute_force():
     rng = np.random.default_rng(7)
     count = rng.integers(8, 5000, 300)
     alpha, beta = rng.uniform(1.0, 8.0, 300), rng.uniform(-4.0, 4.0, 300)
-    got = tim._nearest_turns(alpha, beta, count, tim.PASSES)
+    got = shapes._nearest_turns(alpha, beta, count, shapes.PASSES)
     for i in range(300):
         t = np.arange(count[i])
-        want = np.sort(tim._turn_distance(alpha[i], beta[i], t))[:tim.PASSES]
-        assert len(set(got[i])) == tim.PASSES and np.all((got[i] >= 0) & (got[i] < count[i]))
-        assert np.allclose(np.sort(tim._turn_distance(alpha[i], beta[i], got[i])), want, rtol=0, atol=1e-15)
+        want = np.sort(shapes._turn_distance(alpha[i], beta[i], t))[:shapes.PASSES]
+        assert len(set(got[i])) == shapes.PASSES and np.all((got[i] >= 0) & (got[i] < count[i]))
+        assert np.allclose(np.sort(shapes._turn_distance(alpha[i], beta[i], got[i])), want, rtol=0, atol=1e-15)
