@@ -1464,7 +1464,8 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
         n = t_plate / largest_step(s_w, omega_c, sqrt_w, row, t_plate / n, theta_tab, c_tab,
                                      unresolved_share * tol)
     t_ref = t_plate             # the contact's time scale: t_plate, or the first contact's duration once a run found it
-    for _ in range(12):         # shorter (SHORT_CONTACT)
+    rel = np.inf                # shorter (SHORT_CONTACT); inf if every try was redone (never seen)
+    for _ in range(12):
         H = t_plate / n
         J = levels(n * t_ref / t_plate, tol, smallest_factor)
         while True:
