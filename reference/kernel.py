@@ -1394,6 +1394,8 @@ SMALLEST_SHARE = 0.1
 #: a first contact shorter than this fraction of the time scale used so far (t_plate at first) is solved again with
 #: the step rules (min_steps, smallest step, its error bound) taken from its own duration
 SHORT_CONTACT = 0.9
+#: at most this many levels are added before the runs for the smallest steps' bound (more after them where needed)
+PRE_LEVELS = 3
 
 
 @njit(cache=True)
@@ -1468,6 +1470,15 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     for _ in range(12):
         H = t_plate / n
         J = levels(n * t_ref / t_plate, tol, smallest_factor)
+        if smallest_c > 0.0:
+            # up to PRE_LEVELS more levels before the runs, so that the smallest steps' bound stays within SMALLEST_SHARE
+            # of what the estimate will at least be (the unresolved-mode bound, or the a-priori error at n steps):
+            # a level costs a few nodes, a second set of runs as many as the first
+            floor = max(unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab), tol * min(1.0, (n0 / n) ** 6))
+            for _ in range(PRE_LEVELS):
+                if J >= 30 or smallest_c * (H / 2.0**J / t_ref) ** 2.5 <= SMALLEST_SHARE * floor:
+                    break
+                J += 1
         while True:
             out, core = _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, n, node_cap, est_order,
                                   s_w, omega_c, sqrt_w, row, theta_tab, c_tab)

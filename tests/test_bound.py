@@ -107,8 +107,8 @@ def test_uncertainty_bounds_the_real_error_on_many_random_scenes(seeds):
     same model at tol 1e-12: the real error never exceeds the reported uncertainty (measured with the dense peak: 0 of
     11,448 comparisons on seeds 0-3999 and 0 of 11,476 on 8000-11999, 2 of 11,454 on seeds 4000-7999, 1.17x and 1.69x
     (round 6: the re-measured unresolved-mode table and its binned quadrature sum; round 5 had 1.09x and 1.69x there);
-    round 9 (the smallest steps' error bounded, the step rules from a short contact's own duration): 0 of 45,637 on
-    seeds 0-15999 and 1 of 11,392 (1.06x, seed 17666) on seeds 16000-19999, held out from round 9; docs/reference.md).
+    round 9 (the smallest steps' error bounded, the step rules from a short contact's own duration): 0 of 45,658 on
+    seeds 0-15999 and 1 of 11,398 (1.06x, seed 17666) on seeds 16000-19999, held out from round 9; docs/reference.md).
     The median of reported / real is below 10 (7.3 measured; 6.9 before round 9)."""
     ratios, misses = [], []
     for seed in seeds:
