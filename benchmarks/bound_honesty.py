@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 import impactval
-from impactval.reference.beams import Modes
-from impactval.reference.hertz import plate_impact
 from impactval.reference import kernel
 from impactval.reference import solve as ref_solve
+from impactval.reference.beams import Modes
+from impactval.reference.hertz import plate_impact
 from impactval.reference.solve import solve_modes, structure_modes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -78,25 +78,22 @@ def seeds(lo: int, hi: int) -> None:
 
 
 def _fine_at_levels(args: tuple, n: float, J: int) -> np.ndarray:
-    """(t_m, delta_m) of the fine run of `kernel.solve_triple` at base step t_plate / n with J step levels, for the
-    solve whose kernel arguments are `args` (`solve._kernel_args`)."""
+    """(t_m, delta_m) of the fine run at base step t_plate / n with J step levels (`kernel._estimate`, the solve's own
+    runs), for the solve whose kernel arguments are `args` (`solve._kernel_args`)."""
     t_plate = args[9]
-    max_nodes = int(6 * n + 60 * J + 50)
-    while True:
-        out = kernel.solve_triple(args[0], args[1], args[2], args[3], args[4], args[5], args[6], t_plate / n, J,
-                                  ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW * t_plate, max_nodes)
-        if out[0] == kernel.STATUS_OK:
-            fine = out[9]
-            return np.array([fine[0, 1] - fine[0, 0], fine[0, 2]])
-        max_nodes *= 4
+    out, _ = kernel._estimate(*args[:7], t_plate / n, J, ref_solve.P_DEGREE, ref_solve.GRADING_WINDOW * t_plate, n,
+                              args[19], ref_solve.ESTIMATE_ORDER)
+    fine = out[9]
+    return np.array([fine[0, 1] - fine[0, 0], fine[0, 2]])
 
 
 def smallest_steps(lo: int, hi: int) -> None:
     """The error of the smallest steps (SMALLEST_STEP_C): at the base step each solve chooses and J from tol, the fine
     run with J levels against J + 6 (its smallest step 64x shorter), relative (f_m moves 1.5x delta_m), divided by
-    (eta_min / t_ref)^2.5 (t_ref: t_plate, or the contact's duration where it is shorter, as in the kernel); the constant is read where that difference converges at order 2.5 (X(J) - X(J+6) is 4-8x
-    X(J+1) - X(J+6)). Whether the uncertainty covers the error is `seeds`' check: a solve may take more levels than
-    J (where the bound would pass 10 % of the rest of its estimate), so X(J) - X(J+6) is not its error."""
+    (eta_min / t_ref)^2.5 (t_ref: t_plate, or the contact's duration where it is shorter, as in the kernel); the
+    constant is read where that difference converges at order 2.5 (X(J) - X(J+6) is 4-8x X(J+1) - X(J+6)). Whether
+    the uncertainty covers the error is `seeds`' check: a solve may take more levels than J (where the bound would
+    pass 10 % of the rest of its estimate), so X(J) - X(J+6) is not its error."""
     consts, total, t0 = {}, 0, time.process_time()
     for seed in range(lo, hi):
         scene, n, residual = random_scene(np.random.default_rng(seed))
@@ -122,13 +119,13 @@ def smallest_steps(lo: int, hi: int) -> None:
             total += 1
             # the step relative to the contact's time scale, as the kernel takes it: t_plate, or the contact's
             # duration where it is shorter (kernel.SHORT_CONTACT)
-            t_ref = min(1.0, x[2][0] / args[9]) if x[2][0] < kernel.SHORT_CONTACT * args[9] else 1.0
+            t_ref = x[2][0] / args[9] if x[2][0] < kernel.SHORT_CONTACT * args[9] else 1.0       # in t_plate
             if d1 > 0 and 4.0 < d0 / d1 < 8.0:
                 kind = scene.target.kind
                 consts[kind] = max(consts.get(kind, 0.0), d0 / (1.0 / n_base / 2.0**J / t_ref) ** 2.5)
     print(f"smallest steps, seeds {lo}-{hi - 1}: {total} solves; largest constant where it converges at order 2.5: "
-          f"{', '.join(f'{k} {v:.0f}' for k, v in sorted(consts.items()))} (SMALLEST_STEP_C {ref_solve.SMALLEST_STEP_C:g}) "
-          f"({time.process_time() - t0:.0f} s CPU)")
+          f"{', '.join(f'{k} {v:.0f}' for k, v in sorted(consts.items()))} "
+          f"(SMALLEST_STEP_C {ref_solve.SMALLEST_STEP_C:g}) ({time.process_time() - t0:.0f} s CPU)")
 
 
 def modes_sweeps() -> None:

@@ -1399,11 +1399,9 @@ PRE_LEVELS = 3
 
 
 @njit(cache=True)
-def _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, n, node_cap, est_order, s_w, omega_c, sqrt_w, row,
-              theta_tab, c_tab):
+def _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, n, node_cap, est_order):
     """`solve_triple` at base step H with J levels (more nodes allowed until it fits the first contact's budget) and
-    the relative estimate of the fine run's error without the smallest steps' term: the Richardson estimate of the
-    three runs (the larger of t_m's and 1.5x delta_m's) plus the unresolved-mode bound."""
+    the Richardson estimate of the fine run's relative error (the larger of t_m's and 1.5x delta_m's)."""
     cap = node_cap // 4             # the first contact: a quarter of a window's budget
     max_nodes = min(int(6 * n + 60 * J + 50), cap)
     while True:
@@ -1419,7 +1417,7 @@ def _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, T_w, n, node_cap, est_ord
     # relative; f_m = alpha delta_m^1.5 moves 1.5x as much as delta_m
     rel_t = richardson(tm_f, coarse[0, 1] - coarse[0, 0], coarsest[0, 1] - coarsest[0, 0], est_order) / tm_f
     rel_d = richardson(dm_f, coarse[0, 2], coarsest[0, 2], est_order) / dm_f
-    return out, max(rel_t, 1.5 * rel_d) + unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab)
+    return out, max(rel_t, 1.5 * rel_d)
 
 
 @njit(cache=True)
@@ -1470,18 +1468,19 @@ def solve_auto(omega, g, ew, m0, alpha, v0, R, tol, window, t_plate, delta_plate
     for _ in range(12):
         H = t_plate / n
         J = levels(n * t_ref / t_plate, tol, smallest_factor)
+        unres = unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab)    # the modes H does not resolve (bound)
         if smallest_c > 0.0:
-            # up to PRE_LEVELS more levels before the runs, so that the smallest steps' bound stays within SMALLEST_SHARE
-            # of what the estimate will at least be (the unresolved-mode bound, or the a-priori error at n steps):
-            # a level costs a few nodes, a second set of runs as many as the first
-            floor = max(unresolved(s_w, omega_c, sqrt_w, row, H, theta_tab, c_tab), tol * min(1.0, (n0 / n) ** 6))
+            # up to PRE_LEVELS more levels before the runs, so that the smallest steps' bound stays within
+            # SMALLEST_SHARE of what the estimate will at least be (the unresolved-mode bound, or the a-priori error
+            # at n steps): a level costs a few nodes, a second set of runs as many as the first
+            floor = max(unres, tol * min(1.0, (n0 / n) ** 6))
             for _ in range(PRE_LEVELS):
                 if J >= 30 or smallest_c * (H / 2.0**J / t_ref) ** 2.5 <= SMALLEST_SHARE * floor:
                     break
                 J += 1
         while True:
-            out, core = _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, n, node_cap, est_order,
-                                  s_w, omega_c, sqrt_w, row, theta_tab, c_tab)
+            out, core = _estimate(omega, g, ew, m0, alpha, v0, R, H, J, p, grading * t_plate, n, node_cap, est_order)
+            core += unres
             st, cnt, t, d, f, x, u, e, fl, fine, coarse, coarsest = out
             if st != STATUS_OK:
                 return st, cnt, t, d, f, x, u, e, fl, fine, np.inf, n, 0, np.inf

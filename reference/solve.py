@@ -144,16 +144,17 @@ def _make_run(alpha, t, d, f, x, u, e, table, end: int, drift: float) -> Run:
 #: another); at 1e-5 it is negligible, for ~2 more levels (+4 % nodes on 1,500 random scenes).
 SMALLEST_STEP_FACTOR = 1e-5
 #: that error, relative, is taken as at most SMALLEST_STEP_C (eta_min / t_ref)^2.5 (eta_min = H/2^J, the fine run's
-#: smallest step; t_ref = t_plate, or the first contact's duration where shorter), added to the uncertainty (round 9): the three runs share J, so it falls by 2^2.5 = 5.7 per halving of H,
-#: below the ratio the Richardson estimate trusts (up to 16 / 1.5), and where the base step is far shorter than tol
+#: smallest step; t_ref = t_plate, or the first contact's duration where shorter), added to the uncertainty (round 9):
+#: the three runs share J, so it falls by 2^2.5 = 5.7 per halving of H, below the ratio the Richardson estimate trusts
+#: (up to 16 / 1.5), and where the base step is far shorter than tol
 #: needs (n set by the unresolved modes) it is the larger part of the real error: held-out seed 6832 (a 120-mode plate
 #: at tol 1e-4, n = 512, J = 3) erred 5.7e-8 against an estimate of 3.4e-8, 98 % of it this error (the runs at H, 2H,
 #: 4H fit a H^6 + b H^2.5 with b/a = 55). Measured as |X(J) - X(J + 6)| at the chosen H on seeds 0-1999 of the tests'
 #: generator at tol 1e-4/1e-6/1e-8 (6,000 solves; `python benchmarks/bound_honesty.py 0 2000 --smallest`): where it
 #: converges at order 2.5 (872 solves, X(J) - X(J+6) = 4-8x X(J+1) - X(J+6)) the constant was at most 536 (beams;
 #: plates 195, modal targets 277, median 7); 3x that, as for the unresolved-mode table. With eta_min relative to a
-#: shorter contact's own duration (kernel.SHORT_CONTACT) it is at most 170 / 187 / 277 there, 311 on seeds 4000-7999,
-#: and 134 on 8000-11999 but for one soft beam (seed 9717, contact 2.35 t_plate: 7570, the error 3 % of its estimate):
+#: shorter contact's own duration (kernel.SHORT_CONTACT) it is at most 170 / 185 / 277 there, 311 on seeds 4000-7999,
+#: and 141 on 8000-11999 but for one soft beam (seed 9717, contact 2.35 t_plate: 7570, the error 3 % of its estimate):
 #: the constant is not a bound on every scene; the share below gives the margin, and the honesty counts check it.
 #: With J from tol the term is at most 1.6 % of tol; where it would pass kernel.SMALLEST_SHARE of the rest of the
 #: estimate, the runs are made again with more levels (added alone it loosened random scenes' median reported/real
