@@ -13,6 +13,11 @@ Plates (`random_scene(kinds=("plate",))`: 0.1-1 m, 3-30 mm thick, hit anywhere),
 (calibration) 0 of 111 above, median 13.9, 90th 39, 78 % above 10x (the ratio rule: 12 of 115, up to 40x); 9100-9145
 (held out) 0 of 83, median 13.7, 90th 49, 86 %.
 
+Round 10 (the a-posteriori truncation estimate, solve._swept_truncation; all sets held out for it): beams 5000-5399 0
+of 749 above (1 before contacts over 2.5 t_plate were left to the rule: seed 5379, 1.07x), median 7.4, 90th 21, 30 %
+above 10x; 6000-6399 0 of 762, median 7.8, 90th 25, 34 %; 8000-8199 0 of 369, median 7.4, 90th 21, 29 %; plates
+9000-9059 0 of 111, median 5.2, 90th 17, 21 %; 9100-9145 0 of 83, median 5.2, 90th 16, 17 %.
+
 Run: python benchmarks/auto_mode_honesty.py [LO HI] [--plates]     (seeds 5000-5400: about 20 min on one core; plates
 9000-9060: about 18 min, the truth of a plate reaching 8x 32,768 modes is refused and skipped)
 """
