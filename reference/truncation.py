@@ -12,13 +12,16 @@ period lose nothing to aliasing. Pure functions, SI units.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from impactval.reference.kernel import PEAK_MARGIN, crossing, peak
+
 
 #: Taylor coefficients of P_k(z) = int_0^1 s^k e^{-i z s} ds in powers of (-i z), k = 0, 1, 2: 1 / (m! (k + m + 1))
-_TAYLOR = np.array([[1.0 / (np.prod(np.arange(1, m + 1, dtype=float)) * (k + m + 1)) for m in range(18)]
-                    for k in range(3)])
+_TAYLOR = np.array([[1.0 / (math.factorial(m) * (k + m + 1)) for m in range(18)] for k in range(3)])
 
 
 def _moments(z: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -82,15 +85,16 @@ def dynamic_part(t: np.ndarray, f: np.ndarray, omega: np.ndarray, b: np.ndarray,
 
 
 def metric_shifts(t: np.ndarray, f: np.ndarray, delta: np.ndarray, omega: np.ndarray, b: np.ndarray,
-                  peak_share: float = 0.02) -> tuple[float, float] | None:
+                  peak_share: float | None = None) -> tuple[float, float] | None:
     """First-order relative changes (|d t_m| / t_m, |d delta_m| / delta_m) of the first contact when the dropped modes
     (omega, b) move dynamically, from the run's nodes t [s], f [N], delta [m] (without the feedback of the change on the
     force): delta_m by the dynamic part at the tops of delta's humps within `peak_share` of the largest (the largest;
     each top at the maximum of the interpolant through its nodes: the dynamic part rings at the dropped modes'
     frequencies, so a node's time is not close enough), t_m by the dynamic part where the interpolant crosses zero
-    over the rate delta falls there. None when the run's first contact does not end."""
-    from impactval.reference.kernel import crossing, peak
-
+    over the rate delta falls there. `peak_share` defaults to kernel.PEAK_MARGIN, the humps `dense_peak` refines. None
+    when the run's first contact does not end."""
+    if peak_share is None:
+        peak_share = PEAK_MARGIN
     ends = np.nonzero(delta[1:] <= 0.0)[0]
     if ends.shape[0] == 0:
         return None

@@ -10,6 +10,7 @@ import impactval
 from impactval.reference import solve as ref_solve
 from impactval.reference.solve import solve_modes, structure_modes
 from impactval.reference.truncation import dynamic_part, metric_shifts
+from test_bound import _check_auto, random_scene
 
 
 @pytest.mark.parametrize("omega_T", [3.0, 30.0, 300.0, 3000.0])
@@ -73,12 +74,6 @@ def test_long_contacts_keep_the_rule_whose_bound_covers_the_feedback(monkeypatch
     real truncation error was 5.7x the first-order shift of delta_m (23x that of t_m), 1.07x above the a-posteriori
     estimate. Contacts longer than TRUNCATION_SWEPT_CONTACT t_plate keep the rule's estimate: honest at tol 1e-4 and
     1e-6 against 8x the modes."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_bound import _check_auto, random_scene
-
     scene, _, _ = random_scene(np.random.default_rng(5379), kinds=("beam",), clamped_timoshenko=False)
     t_plate = ref_solve._plate(scene.ball.mass, scene.alpha, scene.ball.velocity).t_m
     assert impactval.solve(scene, tol=1e-4).t_m > ref_solve.TRUNCATION_SWEPT_CONTACT * t_plate
