@@ -278,10 +278,15 @@ def _run_kernel(args: tuple):
         if window > 0.0 and cnt > 0 and t[cnt - 1] > 0.0:
             _refuse_window(window, float(t[cnt - 1]), int(cnt), len(omega))
         cap = node_cap(len(omega)) // 4
-        raise ImpactvalError(
-            f"the first contact needs more than {cap} steps (it lasts far longer than the rigid-plate "
-            f"contact time {t_plate:.3g} s): the structure is far softer than the contact (ball mass "
-            f"{mass:.3g} kg); refused to stay within memory: use a lighter ball, a stiffer target or a looser tol")
+        if node_cap(len(omega)) < NODE_CAP:     # the budget is set by the work, steps x modes
+            why = (f"with {len(omega)} modes (a budget of {MODE_STEP_CAP:.0e} mode-steps, to bound the time): the "
+                   f"tolerance is too tight for this many modes, or the contact lasts far longer than the rigid-plate "
+                   f"contact time {t_plate:.3g} s; use a looser tol, a lighter ball or a stiffer target")
+        else:
+            why = (f"(it lasts far longer than the rigid-plate contact time {t_plate:.3g} s): the structure is far "
+                   f"softer than the contact (ball mass {mass:.3g} kg); refused to stay within memory: use a lighter "
+                   f"ball, a stiffer target or a looser tol")
+        raise ImpactvalError(f"the first contact needs more than {cap} steps {why}")
     return series, fine, rel, end, drift
 
 
@@ -513,10 +518,22 @@ TRUNCATION_SWEPT = {"euler-bernoulli": 2, "timoshenko": 4, "plate": 4}
 #: ball at 0.07 m/s on a glass beam, contact 6.7 t_plate, erred 5.7x the shift of delta_m and 23x that of t_m: 1.07x
 #: above the estimate, random beam seed 5379; the rule alone bounds it)
 TRUNCATION_SWEPT_CONTACT = 2.5
-#: share of tol given to each mode-count run's time step. The truncation estimate carries both runs' time-step
-#: uncertainties (u_n + u_2n)/(r - 1), so this share sets how much the step inflates the reported total: at 1/3, with the
-#: dense peak's fewer steps, the stubby steel beam (tests/unseen) was 41x its real error, at 1/6 (measured) 11x
-STEP_SHARE = 1.0 / 6.0
+#: share of tol given to each mode-count run's time step. The time step's estimate (Richardson, ratio trusted to 16 / 1.5)
+#: is ~8x its real error once the runs are asymptotic, the a-posteriori truncation estimate 2-9x its own: the smaller
+#: the step's share, the more the reported total is the truncation's. At 1/3, with the dense peak's fewer steps, the
+#: stubby steel beam (tests/unseen) was 41x its real error, at 1/6 10.5x, at 1/32 6.1x (round 11; 1.3-2.1x the nodes).
+#: Not smaller: where the truncation error is tiny and of the other sign, the real total shrinks faster than the
+#: estimate (light_ball_heavy_beam: 6.0x at 1/6, 9.6x at 1/32, 26x at 1/96)
+STEP_SHARE = 1.0 / 32.0
+#: ... but no step tolerance below STEP_TOL_FLOOR is asked for unless tol / 6 is: near roundoff each halving of the
+#: estimate costs ever more nodes (the worked beam at tol 1e-12: 22,114 nodes at tol / 6, 81,165 at tol / 32)
+STEP_TOL_FLOOR = 1e-12
+
+
+def step_tolerance(tol: float) -> float:
+    """The time-step tolerance of each mode-count run of a solve at `tol` (relative): STEP_SHARE tol, at least the
+    smaller of tol / 6 and STEP_TOL_FLOOR."""
+    return max(STEP_SHARE * tol, min(tol / 6.0, STEP_TOL_FLOOR))
 
 
 def _dynamic_tail(scene, md: Modes, n: int, mass: float, v0: float, delta_plate: float) -> tuple[float, float]:
@@ -583,7 +600,7 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
     prev, d_prev, f_prev, sens = None, None, None, []
     while True:
         md = structure_modes(scene, n, residual=residual)
-        run, unc = solve_modes(md, mass, alpha, v0, STEP_SHARE * tol)
+        run, unc = solve_modes(md, mass, alpha, v0, step_tolerance(tol))
         f_now, w_next = _dynamic_tail(scene, md, n, mass, v0, delta_plate) if residual else (0.0, 0.0)
         if prev is not None:
             p_run, p_unc = prev
@@ -610,7 +627,7 @@ def _solve_auto_modes(scene, tol: float, window: float, residual: bool):
                         rel = min(rel, max(swept, TRUNCATION_TIGHTEST * rel))
                 trunc = Metrics(rel * b.t_m, rel * b.f_m, rel * b.delta_m)
                 if window > 0.0:       # the same 2n-mode run again, on through the window
-                    run, _ = solve_modes(md, mass, alpha, v0, STEP_SHARE * tol, window)
+                    run, _ = solve_modes(md, mass, alpha, v0, step_tolerance(tol), window)
                 return run, unc, n, trunc
             d_prev = d_now
         prev, f_prev = (run, unc), f_now
