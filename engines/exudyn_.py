@@ -169,7 +169,8 @@ CABLE_NEWTON_RTOL = 1e-6
 
 
 def default_modes(scene, tol: float = DEFAULT_MODE_TOL, cap: int = MAX_DEFAULT_MODES) -> int:
-    """Beam mode count when settings.modes is None: the scene's own `modes`, else the reference's mode
+    """Beam mode count when settings.modes is None: the scene's own `modes` (uncapped: the solid body caps it at
+    MAX_DEFAULT_MODES itself, with a note), else the reference's mode
     criterion for a plain n-mode model (`reference.modechoice.required_modes(scene, tol)
     .count_without_residual`: the dropped modes shift t_m, f_m, delta_m by < 1 %, first order;
     43 for the worked beam), at least 4 and at most `cap` (MAX_DEFAULT_MODES for the solid,
@@ -323,7 +324,16 @@ class ExudynAdapter(EngineAdapter):
             n = settings.modes or default_modes(scene, mode_tol, MAX_REFERENCE_MODES)
             return _reference_modes_structure(target, n)
         n = settings.modes or default_modes(scene, mode_tol)
-        return _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
+        capped = settings.modes is None and n > MAX_DEFAULT_MODES
+        if capped:      # the scene's own `modes` (the reference's model): the solid's FE build grows fast with it
+            n = MAX_DEFAULT_MODES         # (a user's wide glass beam with modes = 160: no result within 600 s; 60: 42 s)
+        s = _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
+        if capped:
+            s.diagnostics["validity"] = (
+                f"solid beam capped at {n} modes (the scene sets {target.modes}; the FE build grows fast with the "
+                f"count): its model error holds the truncation; --modes {target.modes} matches the scene, option "
+                f"beam_model=reference-modes too without an FE build")
+        return s
 
     def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
         """The body's bending frequencies [rad/s] (empty for a rigid plate)."""

@@ -228,6 +228,31 @@ def test_structure_frequencies(adapter):
     assert adapter.structure_frequencies(impactval.load_scene("plate_steel"), EngineSettings()).size == 0
 
 
+def test_a_scene_mode_count_above_the_solid_cap_is_capped_with_a_note_and_an_explicit_count_is_kept(monkeypatch):
+    """The scene's own `modes` (the reference's model) sized the solid FE body without a cap: 160 modes of a user's
+    wide glass beam ran past the 600 s job limit (60: 42 s). Above MAX_DEFAULT_MODES (lowered here to keep the FE
+    builds small) the solid keeps MAX_DEFAULT_MODES modes, its model error holds the truncation and the row says so;
+    --modes (settings.modes) is kept as given; the reference-modes body (no FE build) keeps the scene's count; the note
+    reaches the result's diagnostics["validity"], which the run table shows with the row."""
+    import dataclasses
+
+    from impactval.engines import exudyn_
+    from impactval.engines.exudyn_ import ExudynAdapter
+
+    monkeypatch.setattr(exudyn_, "MAX_DEFAULT_MODES", 4)
+    base = impactval.load_scene("beam_ss_stubby_timoshenko")         # a Timoshenko scene: the solid by default
+    sc = dataclasses.replace(base, target=dataclasses.replace(base.target, modes=7))
+    capped = ExudynAdapter()._structure(sc, EngineSettings())
+    assert capped.diagnostics["beam_model"] == "solid" and len(capped.omega) == 4
+    assert "capped at 4 modes (the scene sets 7" in capped.diagnostics["validity"]
+    explicit = ExudynAdapter()._structure(sc, EngineSettings(modes=5))
+    assert len(explicit.omega) == 5 and "validity" not in explicit.diagnostics
+    ref = ExudynAdapter()._structure(sc, EngineSettings(options=(("beam_model", "reference-modes"),)))
+    assert len(ref.omega) == 7
+    r = ExudynAdapter().run(sc, EngineSettings(dt=1e-6))
+    assert r.status == "ok" and "capped at 4 modes" in r.diagnostics["validity"]
+
+
 def test_window_grows_until_the_contact_ends(adapter, plate, monkeypatch):
     """A window shorter than the contact is doubled (re-run) until the first contact has ended,
     and the tail is simulated after it."""
