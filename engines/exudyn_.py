@@ -329,7 +329,7 @@ class ExudynAdapter(EngineAdapter):
             n = MAX_DEFAULT_MODES         # (a user's wide glass beam with modes = 160: no result within 600 s; 60: 42 s)
         s = _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
         if capped:
-            s.diagnostics["validity"] = (
+            s.diagnostics.setdefault("validity", []).insert(0,
                 f"solid beam capped at {n} modes (the scene sets {target.modes}; the FE build grows fast with the "
                 f"count): its model error holds the truncation; --modes {target.modes} matches the scene, option "
                 f"beam_model=reference-modes too without an FE build")
@@ -744,6 +744,7 @@ def _fem_structure(beam, n: int, elements, use_cache: bool) -> _Structure:
     from impactval.engines.exudyn_fem import fe_beam
 
     fe = fe_beam(beam, n, tuple(elements) if elements else None, use_cache=bool(use_cache))
+    asked, n = n, len(fe.omega)        # fewer when the lowest MOST_EIGENPAIRS eigenpairs hold fewer vertical modes
     cont = _continuum(beam, n)
     centroid = fe.contact_weights @ fe.nodes[fe.contact_nodes]
     nx, ny, nz = fe.elements
@@ -751,12 +752,20 @@ def _fem_structure(beam, n: int, elements, use_cache: bool) -> _Structure:
             "frequency_error": (fe.omega / cont - 1.0).tolist(), "fe_elements": list(fe.elements),
             "fe_dof": fe.n_dof, "fe_build_s": fe.build_s, "fe_cached": fe.cached, "modes": n,
             "fe_mesher": "scikit-fem ElementHex2 (27-node hexahedra)"}
-    return _Structure(nodes=fe.nodes, mass=fe.mass, stiffness=fe.stiffness, mode_basis=fe.mode_basis, omega=fe.omega,
-                      mass_reduced=np.eye(n), stiffness_reduced=np.diag(fe.omega**2),
-                      contact_nodes=fe.contact_nodes, contact_weights=fe.contact_weights, phi_contact=fe.phi_contact,
-                      contact_point=centroid, radius=0.5 * beam.height,
-                      model=f"FFRF reduced-order beam, {n} FE modes ({nx}x{ny}x{nz} hex27, {fe.n_dof} DOF)",
-                      diagnostics=diag)
+    s = _Structure(nodes=fe.nodes, mass=fe.mass, stiffness=fe.stiffness, mode_basis=fe.mode_basis, omega=fe.omega,
+                   mass_reduced=np.eye(n), stiffness_reduced=np.diag(fe.omega**2),
+                   contact_nodes=fe.contact_nodes, contact_weights=fe.contact_weights, phi_contact=fe.phi_contact,
+                   contact_point=centroid, radius=0.5 * beam.height,
+                   model=f"FFRF reduced-order beam, {n} FE modes ({nx}x{ny}x{nz} hex27, {fe.n_dof} DOF)",
+                   diagnostics=diag)
+    if n < asked:
+        from impactval.engines.exudyn_fem import MOST_EIGENPAIRS
+
+        s.diagnostics.setdefault("validity", []).append(
+            f"solid beam with {n} of the {asked} modes asked: the {MOST_EIGENPAIRS} lowest modes of the FE mesh hold "
+            f"only {n} vertical bending modes (a short or wide section's higher modes are three-dimensional); its "
+            f"model error holds the truncation")
+    return s
 
 
 @dataclass
