@@ -18,6 +18,11 @@ of 749 above (1 before contacts over 2.5 t_plate were left to the rule: seed 537
 above 10x; 6000-6399 0 of 762, median 7.8, 90th 25, 34 %; 8000-8199 0 of 369, median 7.4, 90th 21, 29 %; plates
 9000-9059 0 of 111, median 5.2, 90th 17, 21 %; 9100-9145 0 of 83, median 5.2, 90th 16, 17 %.
 
+Round 11 (each mode-count run's time step at tol / 32 instead of tol / 6, solve.STEP_SHARE): beams 5000-5399 0 of 749,
+median 6.0, 90th 15, 21 % above 10x; 6000-6399 0 of 762, median 6.3, 90th 18, 23 %; 8000-8199 0 of 369, median 6.6,
+90th 15, 21 %; plates 9000-9059 0 of 111, median 4.7, 90th 17, 15 %; 9100-9145 0 of 83, median 4.5,
+90th 16, 19 %.
+
 Run: python benchmarks/auto_mode_honesty.py [LO HI] [--plates]     (seeds 5000-5400: about 20 min on one core; plates
 9000-9060: about 18 min, the truth of a plate reaching 8x 32,768 modes is refused and skipped)
 """
