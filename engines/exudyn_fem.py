@@ -237,10 +237,13 @@ def fe_beam(beam, n_modes: int, elements: tuple[int, int, int] | None = None, us
     a_mean, plane_mass = _section_mean_operator(beam, nodes, (xg, yg, zg))
     kff = stiffness[free][:, free].tocsc()
     mff = mass[free][:, free].tocsc()
+    # a fixed start vector: ARPACK's own is drawn from a generator whose state persists across the calls of a process,
+    # so two workers built the same beam's modes 1e-13 apart and two rows of one run disagreed in their structure part
+    v0 = np.random.default_rng(0).standard_normal(len(free))
     k_most = min(len(free) - 2, max(MOST_EIGENPAIRS, 2 * n_modes + 12))
     k = min(2 * n_modes + 12, k_most)
     while True:
-        vals, vecs_f = eigsh(kff, k=k, M=mff, sigma=0.0, which="LM")
+        vals, vecs_f = eigsh(kff, k=k, M=mff, sigma=0.0, which="LM", v0=v0)
         vecs = np.zeros((n_dof, vecs_f.shape[1]))
         vecs[free] = vecs_f
         vals, vecs, bending = _vertical_modes(vals, vecs, mass, a_mean, plane_mass)
