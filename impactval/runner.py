@@ -195,7 +195,7 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     adapter's `model_error_law`) and `numerics_err_*` = err - structure (Hertz laws), lin_err - structure (a
     linear law whose structure part is measured under that spring, against the linear theory; else NaN); `theory_gap_*` (from `theory`, beam scenes) is the other beam theory's reference
     relative to this one; `vs_mujoco_c_*` is MuJoCo Warp against MuJoCo C on the identical model."""
-    err = relative_errors(res, ref) if res.success else dict.fromkeys(METRICS, math.nan)
+    err = relative_errors(res, ref) if res.success else dict.fromkeys(METRICS, math.nan)   # NaN without a reference
     diag = res.diagnostics or {}
     row: dict[str, Any] = dict.fromkeys(COLUMNS, math.nan)
     rs = res.settings or {}
@@ -213,7 +213,7 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],
-        err_curve=curve_error(res, ref) if res.success else math.nan,
+        err_curve=curve_error(res, ref) if res.success and ref.success else math.nan,
         contact_law=getattr(law, "kind", "") or "",
         contact_stiffness=_contact_stiffness(res),
         rebound_velocity=res.rebound_velocity, energy_error=res.energy_error, dt_limit=_num(res.dt_limit),
@@ -253,9 +253,15 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
     if res.success:
         notes = row_notes(res, err if hertz else lin_err, structure, hertz or any(map(math.isfinite, lin_err.values())),
                           against="the Hertz reference" if hertz else "the linear theory")
+        if not ref.success:
+            notes.insert(0, f"{NO_REFERENCE}: {ref.message}")
         if notes:
             row["message"] = "; ".join(notes)
     return row
+
+
+#: the start of an ok row's message when the scene's reference was refused (its errors are NaN; the run exits 1)
+NO_REFERENCE = "no reference to compare with"
 
 
 #: an error this much larger than the model's own estimate (fraction of the reference) needs a note
@@ -355,7 +361,10 @@ class _References:
         if key not in self._ref:
             import impactval
 
-            self._ref[key] = impactval.solve(job.scene, tol=job.tol)
+            try:
+                self._ref[key] = impactval.solve(job.scene, tol=job.tol)
+            except ImpactvalError as exc:   # refused (e.g. over its node budget): the engine rows stand, uncompared
+                self._ref[key] = ImpactResult.failed(job.scene.name, "reference", "crashed", str(exc))
         return self._ref[key]
 
     def lin(self, job: Job, res: ImpactResult) -> ImpactResult | None:
@@ -780,8 +789,10 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
 
 
 def any_failed(df: pd.DataFrame) -> bool:
-    """True when a row has a failing status (see FAILED_STATUSES)."""
-    return bool(df["status"].isin(FAILED_STATUSES).any())
+    """True when a row has a failing status (see FAILED_STATUSES), or an engine result the reference could not be
+    solved for (an ok row without ref_t_m: nothing was checked)."""
+    unchecked = (df["status"] == "ok") & df["ref_t_m"].isna() if "ref_t_m" in df else False
+    return bool((df["status"].isin(FAILED_STATUSES) | unchecked).any())
 
 
 # presentation lives in reports/ (data flows one way); re-exported for existing callers

@@ -150,14 +150,16 @@ def text_table(df: pd.DataFrame) -> str:
 
 
 def _unresolved(df: pd.DataFrame) -> list[str]:
-    """`  - scene / engine: status: message` per row without a result (skipped, unstable, ...): the terminal
-    names the reason, the limit and the fix, as the report's "Rows without a result" does."""
+    """`  - scene / engine: status: message` per row without a result (skipped, unstable, ...) or without a reference
+    to compare it with (an ok row whose scene's reference was refused): the terminal names the reason, the limit and
+    the fix, as the report's "Rows without a result" does."""
     if "message" not in df or "status" not in df:
         return []
     out = []
     for _, r in df.iterrows():
         msg = r["message"]
-        if str(r["status"]) != "ok" and isinstance(msg, str) and msg.strip():
+        unchecked = str(r["status"]) == "ok" and isinstance(msg, str) and msg.startswith("no reference")
+        if (str(r["status"]) != "ok" or unchecked) and isinstance(msg, str) and msg.strip():
             out.append(f"  - {r['scene']} / {r['engine']}: {r['status']}: {' '.join(msg.split())}")
     return out
 

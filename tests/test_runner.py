@@ -177,3 +177,23 @@ def test_unexplained_error_note_names_the_structure_model_under_a_linear_spring(
     assert "f_m" not in linear.split("(")[1].split(")")[0]          # f_m and delta_m are within the estimate
     hertz = " ".join(row_notes(res, err, structure, True))
     assert "try a smaller --dt" in hertz and "under this spring" not in hertz
+
+
+@pytest.mark.slow
+@requires_mujoco
+def test_a_scene_whose_reference_is_refused_keeps_its_rows_and_the_run_goes_on(tmp_path):
+    """A reference the solver refuses (here the heavy ball on the slender beam at tol 1e-12: over its node budget,
+    ~14 s) aborted the whole run with exit 2 once its first row finished (a user's thin PMMA plate under a 0.95 kg
+    ball at tol 1e-6). Now that scene's engine rows are stored with their own numbers and no errors, the message
+    names the refusal, the other scenes are compared as usual, and the run exits 1 (a row nobody checked)."""
+    from impactval.runner import NO_REFERENCE, any_failed
+
+    df = run(["heavy_ball_slender_beam", "plate_steel"], ["mujoco"], tol=1e-12, out=tmp_path)
+    heavy, plate = df.iloc[0], df.iloc[1]
+    assert heavy["status"] == "ok" and math.isfinite(heavy["t_m"]) and math.isnan(heavy["err_t_m"])
+    assert math.isnan(heavy["ref_t_m"]) and heavy["message"].startswith(NO_REFERENCE)
+    assert "steps" in heavy["message"] and "looser tol" in heavy["message"]
+    assert plate["status"] == "ok" and abs(plate["err_f_m"]) < 5e-4
+    assert any_failed(df) and not any_failed(df.iloc[[1]])
+    report = (tmp_path / "report.md").read_text()
+    assert "heavy_ball_slender_beam: no reference at tol 1e-12" in report
