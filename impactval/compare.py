@@ -12,6 +12,9 @@ from scipy.integrate import trapezoid
 
 from impactval.reference.result import ImpactResult
 
+#: the start of an ok row's message when its scene's reference was refused: no errors (NaN), and the run exits 1
+NO_REFERENCE = "no reference to compare with"
+
 
 def relative_errors(result: ImpactResult, ref: ImpactResult) -> dict[str, float]:
     """Signed relative errors in t_m, f_m, delta_m (NaN when either side has no number)."""

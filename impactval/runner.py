@@ -27,7 +27,8 @@ from typing import Any, Callable, Iterable, Mapping
 
 import pandas as pd
 
-from impactval.compare import METRICS, curve_error, error_split, relative_errors, structure_errors, vs_mujoco_c
+from impactval.compare import (METRICS, NO_REFERENCE, curve_error, error_split, relative_errors, structure_errors,
+                               vs_mujoco_c)
 from impactval.engines import ENGINE_MODULES, ENGINES
 from impactval.engines.base import EngineSettings
 from impactval.errors import EngineError, ImpactvalError
@@ -258,10 +259,6 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         if notes:
             row["message"] = "; ".join(notes)
     return row
-
-
-#: the start of an ok row's message when the scene's reference was refused (its errors are NaN; the run exits 1)
-NO_REFERENCE = "no reference to compare with"
 
 
 #: an error this much larger than the model's own estimate (fraction of the reference) needs a note

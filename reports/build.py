@@ -83,7 +83,7 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
             continue
         try:
             ref = impactval.solve(scene, tol=tol)
-        except ImpactvalError as exc:       # refused (its rows are uncompared, see runner.NO_REFERENCE)
+        except ImpactvalError as exc:       # refused (its rows are uncompared, see compare.NO_REFERENCE)
             notes.append(f"{name}: no reference at tol {tol:g}: {exc}")
             continue
         refs.append(reference_record(scene, ref))

@@ -14,6 +14,7 @@ from typing import Any, Iterable, Mapping
 
 import pandas as pd
 
+from impactval.compare import NO_REFERENCE
 from impactval.reports.style import MARKS
 
 
@@ -158,7 +159,7 @@ def _unresolved(df: pd.DataFrame) -> list[str]:
     out = []
     for _, r in df.iterrows():
         msg = r["message"]
-        unchecked = str(r["status"]) == "ok" and isinstance(msg, str) and msg.startswith("no reference")
+        unchecked = str(r["status"]) == "ok" and isinstance(msg, str) and msg.startswith(NO_REFERENCE)
         if (str(r["status"]) != "ok" or unchecked) and isinstance(msg, str) and msg.strip():
             out.append(f"  - {r['scene']} / {r['engine']}: {r['status']}: {' '.join(msg.split())}")
     return out

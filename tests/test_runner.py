@@ -186,7 +186,8 @@ def test_a_scene_whose_reference_is_refused_keeps_its_rows_and_the_run_goes_on(t
     ~14 s) aborted the whole run with exit 2 once its first row finished (a user's thin PMMA plate under a 0.95 kg
     ball at tol 1e-6). Now that scene's engine rows are stored with their own numbers and no errors, the message
     names the refusal, the other scenes are compared as usual, and the run exits 1 (a row nobody checked)."""
-    from impactval.runner import NO_REFERENCE, any_failed
+    from impactval.compare import NO_REFERENCE
+    from impactval.runner import any_failed
 
     df = run(["heavy_ball_slender_beam", "plate_steel"], ["mujoco"], tol=1e-12, out=tmp_path)
     heavy, plate = df.iloc[0], df.iloc[1]
