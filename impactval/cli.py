@@ -393,8 +393,8 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
 
     Every job is stored in the result store as it finishes; a rerun reuses stored jobs (--force
     recomputes). Prints relative errors in % (engine - reference) / reference and wall times.
-    Exit code 0; 1 when a row crashed, timed out, went unstable or found no contact, or (with
-    --baseline) got worse; 2 bad input; 130 / 143 interrupted (Ctrl-C / SIGTERM: the finished jobs
+    Exit code 0; 1 when a row crashed, timed out, went unstable or found no contact, a scene's
+    reference was refused (its rows are kept, uncompared), or (with --baseline) got worse; 2 bad input; 130 / 143 interrupted (Ctrl-C / SIGTERM: the finished jobs
     are stored and reported).
     """
     from impactval.progress import make_progress

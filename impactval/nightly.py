@@ -190,7 +190,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
     from impactval.engines import ENGINES, engine_status
     from impactval.engines.base import EngineSettings
     from impactval.reports.build import write_report
-    from impactval.runner import RunInterrupted, build_jobs, execute, resolve_engine
+    from impactval.runner import RunInterrupted, build_jobs, execute, failed_rows, resolve_engine
     from impactval.scenarios.scene import catalogue_names, load_catalogue
     from impactval.store import Store, export
 
@@ -252,7 +252,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         trend = history.wall_time_steps(hist, checks["wall_time"].rel) if len(hist) else history.wall_time_steps(None)
         cmp = None
         code, message, good = 0, "", False
-        failed = df["status"].isin(["crashed", "timeout", "unstable", "no-contact"])
+        failed = failed_rows(df)
         ran = ~df["status"].isin(["not-installed", "skipped"])
         if not ran.any():
             code = 2

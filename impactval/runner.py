@@ -785,11 +785,16 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
     return df
 
 
-def any_failed(df: pd.DataFrame) -> bool:
-    """True when a row has a failing status (see FAILED_STATUSES), or an engine result the reference could not be
-    solved for (an ok row without ref_t_m: nothing was checked)."""
+def failed_rows(df: pd.DataFrame) -> pd.Series:
+    """Per row: a failing status (see FAILED_STATUSES), or an engine result the reference could not be solved for
+    (an ok row without ref_t_m: nothing was checked)."""
     unchecked = (df["status"] == "ok") & df["ref_t_m"].isna() if "ref_t_m" in df else False
-    return bool((df["status"].isin(FAILED_STATUSES) | unchecked).any())
+    return df["status"].isin(FAILED_STATUSES) | unchecked
+
+
+def any_failed(df: pd.DataFrame) -> bool:
+    """True when a row failed (`failed_rows`): the run exits 1."""
+    return bool(failed_rows(df).any())
 
 
 # presentation lives in reports/ (data flows one way); re-exported for existing callers
