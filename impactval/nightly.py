@@ -190,7 +190,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
     from impactval.engines import ENGINES, engine_status
     from impactval.engines.base import EngineSettings
     from impactval.reports.build import write_report
-    from impactval.runner import RunInterrupted, build_jobs, execute, failed_rows, resolve_engine
+    from impactval.runner import References, RunInterrupted, build_jobs, execute, failed_rows, resolve_engine
     from impactval.scenarios.scene import catalogue_names, load_catalogue
     from impactval.store import Store, export
 
@@ -235,14 +235,16 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         resumed = night in set(runs["night"])
         jobs = [_night_job(j, night) for j in build_jobs(scene_objs, specs, [settings], tol)]
         run_id = str(uuid.uuid4())
+        solved = References()      # the references the jobs are compared with, handed on to the report
         try:
             rows = execute(jobs, store=db, workers=workers, scheduler=scheduler, progress=progress, out=out,
                            command=command or f"impactval nightly --suite {suite}", tag=f"{TAG_PREFIX}/{suite}/{night}",
-                           keep_series=True, on_row=on_row, run_id=run_id)
+                           keep_series=True, on_row=on_row, run_id=run_id, references=solved)
         except RunInterrupted as stop:
             export(db, out)
             write_report(db, stop.run_id, out, title=f"impactval nightly ({suite}): interrupted", settings=settings,
-                         tol=tol, html=html, extra_info={"suite": suite}, scenes={s.name: s for s in scene_objs})
+                         tol=tol, html=html, extra_info={"suite": suite}, scenes={s.name: s for s in scene_objs},
+                         references=solved.by_name(scene_objs, tol))
             raise
         df = pd.DataFrame(rows)
         export(db, out)
@@ -297,7 +299,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
             db, run_id, out, title=f"impactval nightly ({suite})", rows=df, cmp=cmp,
             baseline=None if base is None else f"run `{base['id']}` of {str(base['started_at'])[:19]}",
             checks=checks, history=hist, trend=trend, settings=settings, tol=tol, html=html,
-            scenes={s.name: s for s in scene_objs},
+            scenes={s.name: s for s in scene_objs}, references=solved.by_name(scene_objs, tol),
             extra_info={"suite": f"{suite} ({len(scene_objs)} scenes x {len(specs)} engines), night {night}",
                         "verdict": f"exit {code}: {message}"},
             extra_md=verdict_md)

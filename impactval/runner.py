@@ -330,7 +330,7 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
 
 
 # ---------------------------------------------------------------------------- execution
-class _References:
+class References:
     """Reference (and linear-theory) solutions, computed once per scene, tolerance and spring."""
 
     def __init__(self, known: Iterable[tuple[Any, float, ImpactResult]] = ()) -> None:
@@ -363,6 +363,17 @@ class _References:
             except ImpactvalError as exc:   # refused (e.g. over its node budget): the engine rows stand, uncompared
                 self._ref[key] = ImpactResult.failed(job.scene.name, "reference", "crashed", str(exc))
         return self._ref[key]
+
+    def solved(self, scene, tol: float) -> ImpactResult | None:
+        """The reference of `scene` at `tol` if it was solved (or refused: a failed result holding the refusal),
+        else None."""
+        from impactval.jobs import canonical_scene
+
+        return self._ref.get((canonical_scene(scene), tol))
+
+    def by_name(self, scenes: Iterable[Any], tol: float) -> dict[str, ImpactResult]:
+        """`solved` for each of `scenes` at `tol`, by scene name (those solved or refused only): what a report takes."""
+        return {s.name: r for s in scenes if (r := self.solved(s, tol)) is not None}
 
     def lin(self, job: Job, res: ImpactResult) -> ImpactResult | None:
         """The linear-theory reference for a linear contact law (a native contact), else None."""
@@ -447,7 +458,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
             scheduler: Any = None, force: bool = False, progress: Any = None, out: str | Path | None = None,
             command: str = "", tag: str | None = None, keep_series: bool = False,
             on_row: Callable[[dict[str, Any]], None] | None = None, run_id: str | None = None,
-            references: Iterable[tuple[Any, float, ImpactResult]] = (),
+            references: Iterable[tuple[Any, float, ImpactResult]] | References = (),
             theory_gap: bool = True) -> list[dict[str, Any]]:
     """Run engine jobs (reusing stored ones) and return one row per job, in the jobs' order.
 
@@ -469,8 +480,9 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         Called with each row dict as soon as it is stored.
     run_id : str, optional
         The run's id (default: a new UUID4).
-    references : iterable of (scene, tol, reference ImpactResult), optional
-        References the caller has solved already (not solved again for jobs of that scene and tol).
+    references : iterable of (scene, tol, reference ImpactResult), or a `References`, optional
+        References the caller has solved already (not solved again for jobs of that scene and tol); a
+        `References` given is filled with those this call solves (`run` hands them on to its report).
     theory_gap : bool
         For beam scenes, also solve the reference with the other beam theory once per scene
         (`theory_gap_*`, `timoshenko_frequencies`; ~0.01 s for a simply supported beam, 3-17 s for a
@@ -504,7 +516,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
             todo[k] = j
     if progress is not None:
         progress.start(len(set(keys)), n_reused)
-    refs = _References(references)
+    refs = references if isinstance(references, References) else References(references)
 
     def finish(k: str, res: ImpactResult, seconds: float) -> None:
         job = todo[k]
@@ -738,9 +750,10 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         ",".join(specs) + ")"
     run_id = str(uuid.uuid4())
     interrupted: RunInterrupted | None = None
+    solved = References()          # the references the jobs are compared with, handed on to the report
     try:
         rows = execute(jobs, store=db, run_id=run_id, workers=workers, scheduler=scheduler, force=force, progress=progress,
-                       out=out, command=cmd, tag=tag, keep_series=keep_series, on_row=on_row)
+                       out=out, command=cmd, tag=tag, keep_series=keep_series, on_row=on_row, references=solved)
     except RunInterrupted as err:
         interrupted, rows = err, err.rows
     df = pd.DataFrame(rows, columns=list(COLUMNS))
@@ -773,7 +786,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         # report.md + figures + report.html, from the store (presentation lives in reports/)
         write_report(db, run_id, out, rows=df, cmp=cmp, baseline=None if baseline is None else f"`{baseline}`",
                      checks=threshold, settings=settings, tol=tol, extra_md=extra,
-                     scenes={s.name: s for s in scene_objs})
+                     scenes={s.name: s for s in scene_objs},
+                     references=solved.by_name(scene_objs, tol))
     df.attrs["notes"] = notes
     info = db.run_info(run_id)
     df.attrs.update(run_id=info["id"], n_reused=info["n_reused"], status=info["status"])

@@ -58,10 +58,13 @@ def scenes_from_command(command: str) -> dict[str, Any]:
 
 
 def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots: bool = True,
-                  scenes: Mapping[str, Any] | None = None) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
+                  scenes: Mapping[str, Any] | None = None, references: Mapping[str, Any] | None = None
+                  ) -> tuple[list[tuple[str, str]], pd.DataFrame, list[str]]:
     """Force-curve figures (caption, file name), the reference table (reports.provenance records)
     and notes, for every scene of `rows`. `scenes`: the run's Scene objects by name (scene files given as
-    paths are not in the catalogue); a scene not there is looked up in the catalogue."""
+    paths are not in the catalogue); a scene not there is looked up in the catalogue. `references`: the
+    references the run already solved at `tol` (ImpactResult by scene name; a failed one holds the
+    refusal), used instead of solving again (a refused scene's refusal can take tens of seconds)."""
     import impactval
     from impactval.reports.plots import finite_series, force_curves_plot, thin
     from impactval.reports.provenance import reference_record
@@ -81,11 +84,16 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
             notes.append(f"{name}: the scene or reference changed since this run (scene hash "
                          f"{g['scene_hash'].iloc[0]} -> {scene_hash(scene)}); reference values and curve not redrawn")
             continue
-        try:
-            ref = impactval.solve(scene, tol=tol)
-        except ImpactvalError as exc:       # refused (its rows are uncompared, see compare.NO_REFERENCE)
-            notes.append(f"{name}: no reference at tol {tol:g}: {exc}")
+        ref = (references or {}).get(name)
+        if ref is not None and not ref.success:     # refused in the run (its rows are uncompared)
+            notes.append(f"{name}: no reference at tol {tol:g}: {ref.message}")
             continue
+        if ref is None:
+            try:
+                ref = impactval.solve(scene, tol=tol)
+            except ImpactvalError as exc:       # refused (its rows are uncompared, see compare.NO_REFERENCE)
+                notes.append(f"{name}: no reference at tol {tol:g}: {exc}")
+                continue
         refs.append(reference_record(scene, ref))
         if not plots:
             continue
@@ -130,12 +138,13 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
                  cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
                  history: pd.DataFrame | None = None, trend: pd.DataFrame | None = None, settings=None,
                  tol: float = 1e-6, extra_info: dict[str, Any] | None = None, extra_md: str = "",
-                 html: bool = True, plots: bool = True, scenes: Mapping[str, Any] | None = None
-                 ) -> tuple[Path, Path | None]:
+                 html: bool = True, plots: bool = True, scenes: Mapping[str, Any] | None = None,
+                 references: Mapping[str, Any] | None = None) -> tuple[Path, Path | None]:
     """Write out/report.md (+ PNG figures) and out/report.html for run `run_id` of `store`.
 
     `history`: rows of the last nights (run_index, night, mark, ...) for the trend plots; `trend`:
-    impactval.history.wall_time_steps; `cmp`, `baseline`, `checks`: the comparison. Returns the paths."""
+    impactval.history.wall_time_steps; `cmp`, `baseline`, `checks`: the comparison; `references`: the references the
+    run already solved at `tol`, by scene name (not solved again; see `scene_figures`). Returns the paths."""
     import importlib.util
 
     from impactval.reports.html import write_html
@@ -147,7 +156,8 @@ def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval
     plots = plots and importlib.util.find_spec("matplotlib") is not None
     if scenes is None:          # a re-render: the scene files named on the run's command line, where still found
         scenes = scenes_from_command(str(store.run_info(run_id).get("command") or ""))
-    figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots, scenes=scenes)
+    figures, refs, notes = scene_figures(store, rows, out, tol=tol, plots=plots, scenes=scenes,
+                                         references=references)
     if plots and history is not None and len(history) and history["run_index"].nunique() > 1:
         from impactval.history import row_key
         from impactval.reports.plots import trend_plot
