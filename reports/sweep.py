@@ -282,6 +282,19 @@ def _log_axes(ax, xlabel: str, ylabel: str) -> None:
     ax.grid(True, which="minor", alpha=0.12)
 
 
+def _no_error_panel(ax, xs: pd.Series, x_default: tuple[float, float]) -> None:
+    """A log-log panel where no cell has an error (every cell failed or was unstable): matplotlib cannot pick log
+    limits without positive data, so the panel gets a decade of x around the cells' finite positive x values (else
+    `x_default`), 1e-3 .. 1e2 % in y, and says why it holds no points."""
+    x = pd.to_numeric(xs, errors="coerce")
+    x = x[(x > 0) & np.isfinite(x)]
+    lo, hi = (float(x.min()) / 3.0, float(x.max()) * 3.0) if len(x) else x_default
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(1e-3, 1e2)
+    ax.text(0.5, 0.5, "no cell gave an error\n(all failed or unstable: x marks above)", transform=ax.transAxes,
+            ha="center", va="center", fontsize=9, color="0.35")
+
+
 def _styles(d: pd.DataFrame):
     """Marker per integrator and line style per segment count, within each engine."""
     marks, lines = {}, {}
@@ -350,6 +363,8 @@ def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) 
         _under_lines(ax, unders)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        if ok.empty:
+            _no_error_panel(ax, g["cost_s"], (1e-3, 1e1))
         _log_axes(ax, "cost: stepping wall time [s]", "largest |error| [%]")
         ax.set_title(f"{scene}: error vs cost (front circled)", fontsize=10)
         if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none
@@ -413,6 +428,8 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
         _under_lines(ax, unders)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        if not (g["score"] > 0).any():
+            _no_error_panel(ax, g["dt"], (1e-7, 1e-5))
         _log_axes(ax, "time step dt [s]", "|error| [%]")
         ax.set_title(f"{scene} / {engine}", fontsize=10, color=colour)
         if ax.get_legend_handles_labels()[0]:          # a panel of skipped cells only has none

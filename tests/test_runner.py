@@ -153,6 +153,22 @@ def test_dt_sweep_rows_table_and_plot(tmp_path):
     assert (tmp_path / "speed_accuracy.png").stat().st_size > 1000
 
 
+@requires_mujoco
+def test_dt_sweep_where_every_step_fails_still_writes_its_plots(tmp_path):
+    """Every dt of a run unstable (a user's 1.3 m WC cantilever under a glass ball: Exudyn's energy grew at 1e-7 and
+    5e-8 s) left the speed/accuracy panel without a positive value: matplotlib's log axes raised and the run ended in
+    an internal error with no results.csv. Here both steps are above MuJoCo's predicted limit (refused, no stepping
+    time either): the run writes its files, the plots say the cells have no error."""
+    from impactval.reports.sweep import plot_error_vs_dt
+    from impactval.runner import run
+
+    df = run(["plate_steel"], ["mujoco"], dt=[1e-3, 5e-4], out=tmp_path)
+    assert (df["status"] == "unstable").all() and df["err_f_m"].isna().all()
+    assert (tmp_path / "results.csv").is_file() and (tmp_path / "speed_accuracy.png").stat().st_size > 1000
+    paths = plot_error_vs_dt(df, [], tmp_path / "vs_dt")
+    assert {p.suffix for p in paths} == {".png", ".svg"} and "no cell gave an error" in (tmp_path / "vs_dt.svg").read_text()
+
+
 def test_cli_bad_dt_list_is_one_line(tmp_path):
     import subprocess
     import sys
