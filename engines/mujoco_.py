@@ -196,10 +196,18 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     r = hit if root == "hit" else (n - 1) // 2
     lay.root_segment = r
 
+    # the small bodies at the supports (roller or clamp slide at x = 0, the shear slide at x = L) turn with segment 0
+    # and n-1: their point rotary inertia is taken off those segments' (the same totals)
+    tiny = _point_inertia(chain) if support in ("simply-supported", "clamped-clamped") or chain.shear else 0.0
+    carries = {0: tiny}
+    if chain.shear and support in ("simply-supported", "clamped-clamped"):
+        carries[n - 1] = carries.get(n - 1, 0.0) + tiny
+
     def segment(i: int, left: bool) -> str:
         """Body i's inertial (and hit site); its frame is at its left end (root, right branch) or right end."""
         x0 = -l if left else 0.0          # the segment spans [x0, x0 + l] in its frame
-        s = f'<inertial pos="{_vec(x0 + l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy, izz)}"/>'
+        iyy_i = iyy - carries.get(i, 0.0)
+        s = f'<inertial pos="{_vec(x0 + l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy_i, izz)}"/>'
         if i == hit:
             off = chain.hit_offset
             s += f'<site name="hit" pos="{_vec(x0 + off, 0, h / 2)}" size="0.001"/>'
@@ -211,7 +219,6 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     # the roller at x = 0 (simply supported, clamped-clamped): a body on a slide-x joint at node 0, pinned
     # to the world below; its mass never moves (pinned), its rotary inertia is negligible
     roller = ""
-    tiny = 1e-6 * iyy
     if support in ("simply-supported", "clamped-clamped"):
         shear0 = (f'<joint name="s0" type="slide" axis="0 0 1" stiffness="{_fmt(chain.support_shear_stiffness)}"/>'
                   if chain.shear else "")
@@ -274,6 +281,24 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     return chain_xml, extra
 
 
+#: the smallest rotary inertia [kg m^2] given to a body: 10x MuJoCo's mjMINVAL (1e-15), below which it refuses a
+#: moving body ("mass and inertia of moving bodies must be larger than mjMINVAL")
+MIN_INERTIA = 1e-14
+
+
+def _point_inertia(chain: HenckyChain) -> float:
+    """Rotary inertia [kg m^2] of the small bodies at a chain's supports (a roller, a clamp's or an end's shear
+    slide): a point's, 1e-6 of a segment's, but at least MIN_INERTIA (a user's 158 x 2.5 x 1.2 mm PMMA Timoshenko beam
+    in 182 segments: 1e-6 x 3.4e-13 kg m^2 was below what MuJoCo accepts, and the job crashed). The segment each turns
+    with gives up as much, so the chain's inertia is unchanged; a segment too light for that is refused."""
+    tiny = max(1e-6 * chain.rotary_inertia, MIN_INERTIA)
+    if chain.rotary_inertia - 2.0 * tiny < MIN_INERTIA or chain.segment_mass / 2.0 < MIN_INERTIA:
+        raise EngineError(f"mujoco: the chain's segments are too light for MuJoCo (mass {chain.segment_mass:.2g} kg, "
+                          f"rotary inertia {chain.rotary_inertia:.2g} kg m^2; it refuses moving bodies below 1e-15): "
+                          f"use fewer segments (--segments) or a larger beam.")
+    return tiny
+
+
 def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, support: str, ixx: float,
                      izz: float) -> tuple[str, str]:
     """root = "end": segment 0 on the supports' joints, the others in series (see the module docstring)."""
@@ -281,6 +306,8 @@ def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, suppo
     w, h = chain.width, chain.height
     k_hinge, k_clamp = chain.hinge_stiffness, chain.clamp_stiffness
     m_seg, iyy, hit = chain.segment_mass, chain.rotary_inertia, chain.hit_segment
+    has_end = chain.shear and support != "cantilever"
+    tiny = _point_inertia(chain) if has_end else 0.0
     parts, closes = [], []
     for i in range(n):
         pos = _vec(0.0, 0.0, 0.0) if i == 0 else _vec(l, 0.0, 0.0)
@@ -296,17 +323,18 @@ def _serial_beam_xml(chain: HenckyChain, lay: _Layout, contact_geom: bool, suppo
             if chain.shear:      # node i's shear: a slide along the previous segment's transverse axis
                 s.append(f'<joint name="s{i}" type="slide" axis="0 0 1" stiffness="{_fmt(chain.shear_stiffness)}"/>')
             s.append(f'<joint name="h{i}" type="hinge" axis="0 1 0" stiffness="{_fmt(k_hinge)}"/>')
-        s.append(f'<inertial pos="{_vec(l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy, izz)}"/>')
+        # the end body's rotary inertia (it turns with segment n-1) is taken off that segment's: the same total
+        iyy_i = iyy - tiny if i == n - 1 else iyy
+        s.append(f'<inertial pos="{_vec(l / 2, 0, 0)}" mass="{_fmt(m_seg)}" diaginertia="{_vec(ixx, iyy_i, izz)}"/>')
         if i == hit:
             off = chain.hit_offset
             s.append(f'<site name="hit" pos="{_vec(off, 0, h / 2)}" size="0.001"/>')
             if contact_geom:
                 s.append(f'<geom name="target" type="box" pos="{_vec(off, 0, 0)}" '
                          f'size="{_vec(l / 2, w / 2, h / 2)}" contype="0" conaffinity="0" mass="0"/>')
-        if chain.shear and i == n - 1 and support != "cantilever":
+        if has_end and i == n - 1:
             # the supported end at x = L: a small body on a transverse slide of 2 kappa G A / l, pinned below;
-            # half a segment's mass (pinned, it hardly moves), the rotary inertia of a point
-            tiny = 1e-6 * iyy
+            # half a segment's mass (pinned, it hardly moves), the rotary inertia of a point (`_point_inertia`)
             s.append(f'<body name="end" pos="{_vec(l, 0, 0)}"><joint name="s{n}" type="slide" axis="0 0 1" '
                      f'stiffness="{_fmt(chain.support_shear_stiffness)}"/><inertial pos="0 0 0" '
                      f'mass="{_fmt(m_seg / 2)}" diaginertia="{_vec(tiny, tiny, tiny)}"/></body>')

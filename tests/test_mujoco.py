@@ -148,6 +148,38 @@ def test_a_long_chain_takes_its_frequencies_from_the_chain_model_which_mujoco_ma
         adapter.close(small)
 
 
+@pytest.mark.parametrize("root", ["end", "middle"])
+def test_a_thin_timoshenko_chain_builds_with_its_support_bodies_inertia_in_range(adapter, tmp_path, root):
+    """A user's 158 x 2.5 x 1.2 mm PMMA Timoshenko beam under a steel ball crashed MuJoCo's compiler ("mass and
+    inertia of moving bodies must be larger than mjMINVAL"): the end's shear-slide body had 1e-6 of a segment's
+    rotary inertia, 3.4e-19 kg m^2. It now gets at least 1e-14 and its segment gives up as much: the model builds
+    and the chain's total rotary inertia is the chain model's (1e-9), either tree root. A chain whose segments are
+    too light for that is refused with the field to change."""
+    from impactval.engines.mujoco_ import MIN_INERTIA
+
+    path = tmp_path / "thin_pmma_timoshenko.toml"
+    path.write_text('[ball]\nradius = 0.0064298\nvelocity = 0.07385\nmaterial = "steel"\n[target]\nkind = "beam"\n'
+                    'material = "pmma"\nsupport = "simply-supported"\nlength = 0.15784\nwidth = 0.0024899\n'
+                    'height = 0.0011588\nimpact_at = 0.6945\ntheory = "timoshenko"\n')
+    sc = impactval.load_scene(str(path))
+    settings = EngineSettings(segments=182, dt=1e-7, options={"chain_root": root})
+    chain = adapter.chain(sc, adapter.check_settings(settings))
+    assert 1e-6 * chain.rotary_inertia < 1e-15          # the case: a point's inertia below MuJoCo's floor
+    run = adapter.build(sc, adapter.check_settings(settings))
+    try:
+        m = run.model
+        iyy = m.body_inertia[1:, :].min(axis=1)
+        assert iyy.min() >= MIN_INERTIA
+        names = [m.body(i).name for i in range(1, m.nbody)]
+        beam = [k for k, name in enumerate(names) if name.startswith("seg") or name in ("end", "roller0", "clamp0")]
+        total = float(np.sum(m.body_inertia[1:, 1][beam]))
+    finally:
+        adapter.close(run)
+    assert total == pytest.approx(chain.n * chain.rotary_inertia, rel=1e-9)
+    with pytest.raises(EngineError, match="too light for MuJoCo.*--segments"):
+        adapter.build(sc, adapter.check_settings(EngineSettings(segments=40000, dt=1e-7)))
+
+
 def test_modal_target_injected_hertz(adapter):
     sc = impactval.load_scene("modal_two_mode")
     ref = impactval.solve(sc, tol=1e-7)
