@@ -281,9 +281,9 @@ def _beam_xml(beam, chain: HenckyChain, lay: _Layout, contact_geom: bool, root: 
     return chain_xml, extra
 
 
-#: the smallest rotary inertia [kg m^2] given to a body: 10x MuJoCo's mjMINVAL (1e-15), below which it refuses a
+#: the smallest rotary inertia [kg m^2] given to a body: 2x MuJoCo's mjMINVAL (1e-15), below which it refuses a
 #: moving body ("mass and inertia of moving bodies must be larger than mjMINVAL")
-MIN_INERTIA = 1e-14
+MIN_INERTIA = 2e-15
 
 
 def _point_inertia(chain: HenckyChain) -> float:
