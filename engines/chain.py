@@ -299,7 +299,7 @@ def chain_notes(scene, chain: HenckyChain, me: ChainModelError, tol: float, capp
         notes.append(f"Euler-Bernoulli chain on a Timoshenko scene: its model error {100 * me.largest:.2f} % is the "
                      f"beam-theory difference (the chain itself is {100 * own.largest:.2f} % off Euler-Bernoulli); "
                      "compare it on theory = \"euler-bernoulli\" or use a shear-deformable model: exudyn (solid beam), mujoco "
-                     "with chain_root = end, mujoco-warp, pybullet or newton (semi-implicit/featherstone): their Timoshenko chains")
+                     "with chain_root = auto, end or middle, mujoco-warp, pybullet or newton (semi-implicit/featherstone): their Timoshenko chains")
     if capped_at is not None and own.largest > tol and chain.n >= capped_at - 12:
         notes.append(f"chain capped at {chain.n} links (the engine's most links: {capped_at}): its own "
                      f"{'Timoshenko' if chain.shear else 'Euler-Bernoulli'} model error is {100 * own.largest:.2f} %, above chain_tol {100 * tol:g} %")
