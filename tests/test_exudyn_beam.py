@@ -192,6 +192,24 @@ def test_reference_modes_within_half_percent(adapter, name):
     assert np.all(np.abs(_rel(r, ref)) <= 5e-3), _rel(r, ref)
 
 
+def _user_beam(tmp_path, name: str, ball: str, beam: str):
+    """A user's beam scene from its TOML lines (`ball`: the [ball] table's, `beam`: the beam target's, kind added)."""
+    path = tmp_path / f"{name}.toml"
+    path.write_text(f"[ball]\n{ball}\n[target]\nkind = \"beam\"\n{beam}\n")
+    return impactval.load_scene(str(path))
+
+
+def _default_row_within_its_model_error(adapter, sc, ref_tol: float):
+    """The scene's default Exudyn row: ok, each metric within the row's model_error + 0.1 % of the reference at
+    `ref_tol`. Returns (row, reference)."""
+    ref = impactval.solve(sc, tol=ref_tol)
+    r = adapter.run(sc, EngineSettings())
+    assert r.status == "ok", r.message
+    err = _rel(r, ref)
+    assert np.all(np.abs(err) <= r.model_error + 1e-3), (err, r.model_error)
+    return r, ref
+
+
 @requires_exudyn
 def test_heavy_ball_at_a_cantilever_tip_is_not_flagged_as_energy_growth(adapter, tmp_path):
     """A user's 1.3 m tungsten-carbide cantilever (6 x 9 mm) hit at its tip by a 20 mm glass ball at 5.3 m/s: the
@@ -199,17 +217,11 @@ def test_heavy_ball_at_a_cantilever_tip_is_not_flagged_as_energy_growth(adapter,
     (2e-7, 1e-7, 5e-8 s) though its contact ended within 1e-4 of the reference's: the energy came from the mesh's
     linear stiffness matrix, which counts the bent beam's shortened projection as stretch. With the element's own
     strain energy the row is ok, its energy within 0.1 %, its metrics within its model_error + 0.1 %."""
-    scene = tmp_path / "wc_cantilever_glass_ball.toml"
-    scene.write_text('[ball]\nradius = 0.02\nvelocity = 5.3\nmaterial = "glass"\n[target]\nkind = "beam"\n'
-                     'material = "tungsten-carbide"\nsupport = "cantilever"\nlength = 1.3\nwidth = 0.009\n'
-                     'height = 0.006\nimpact_at = 1.0\n')
-    sc = impactval.load_scene(str(scene))
-    ref = impactval.solve(sc, tol=1e-5)
-    r = adapter.run(sc, EngineSettings())
-    assert r.status == "ok", r.message
+    sc = _user_beam(tmp_path, "wc_cantilever_glass_ball", 'radius = 0.02\nvelocity = 5.3\nmaterial = "glass"',
+                    'material = "tungsten-carbide"\nsupport = "cantilever"\nlength = 1.3\nwidth = 0.009\n'
+                    'height = 0.006\nimpact_at = 1.0')
+    r, _ = _default_row_within_its_model_error(adapter, sc, 1e-5)
     assert abs(r.energy_error) < 1e-3
-    err = _rel(r, ref)
-    assert np.all(np.abs(err) <= r.model_error + 1e-3), (err, r.model_error)
 
 
 @requires_exudyn
@@ -221,19 +233,13 @@ def test_a_contact_much_shorter_than_the_rigid_plate_time_sizes_the_automatic_st
     200 and the row within its model_error + 0.1 %."""
     from impactval.engines.base import STEPS_PER_CONTACT, contact_time, plate_times
 
-    scene = tmp_path / "heavy_wc_ball_al_beam.toml"
-    scene.write_text('[ball]\nradius = 0.035038\nvelocity = 0.3074\nmaterial = "tungsten-carbide"\n[target]\n'
-                     'kind = "beam"\nmaterial = "aluminium"\nsupport = "simply-supported"\nlength = 0.63866\n'
-                     'width = 0.0078706\nheight = 0.0085668\nimpact_at = 0.8927\n')
-    sc = impactval.load_scene(str(scene))
-    ref = impactval.solve(sc, tol=1e-6)
+    sc = _user_beam(tmp_path, "heavy_wc_ball_al_beam", 'radius = 0.035038\nvelocity = 0.3074\nmaterial = "tungsten-carbide"',
+                    'material = "aluminium"\nsupport = "simply-supported"\nlength = 0.63866\nwidth = 0.0078706\n'
+                    'height = 0.0085668\nimpact_at = 0.8927')
+    r, ref = _default_row_within_its_model_error(adapter, sc, 1e-6)
     assert ref.t_m < 0.3 * plate_times(sc).t_m
     assert contact_time(sc) == pytest.approx(ref.t_m, rel=1e-4)
-    r = adapter.run(sc, EngineSettings())
-    assert r.status == "ok", r.message
     assert r.dt <= ref.t_m / STEPS_PER_CONTACT
-    err = _rel(r, ref)
-    assert np.all(np.abs(err) <= r.model_error + 1e-3), (err, r.model_error)
 
 
 @requires_exudyn
@@ -289,16 +295,10 @@ def test_a_light_ball_on_a_short_stiff_cantilever_passes_its_first_newton_step(a
     row's model_error + 0.1 % of the reference. Without it (the same run) the row is unstable."""
     import impactval.engines.exudyn_ as ex
 
-    scene = tmp_path / "light_al_ball_wc_cantilever.toml"
-    scene.write_text('[ball]\nradius = 0.005378\nvelocity = 0.7926\nmaterial = "aluminium"\n[target]\nkind = "beam"\n'
-                     'material = "tungsten-carbide"\nsupport = "cantilever"\nlength = 0.14908\nwidth = 0.0041523\n'
-                     'height = 0.0041599\nimpact_at = 0.9962\n')
-    sc = impactval.load_scene(str(scene))
-    ref = impactval.solve(sc, tol=1e-6)
-    r = adapter.run(sc, EngineSettings())
-    assert r.status == "ok", r.message
-    err = _rel(r, ref)
-    assert np.all(np.abs(err) <= r.model_error + 1e-3), (err, r.model_error)
+    sc = _user_beam(tmp_path, "light_al_ball_wc_cantilever", 'radius = 0.005378\nvelocity = 0.7926\nmaterial = "aluminium"',
+                    'material = "tungsten-carbide"\nsupport = "cantilever"\nlength = 0.14908\nwidth = 0.0041523\n'
+                    'height = 0.0041599\nimpact_at = 0.9962')
+    _default_row_within_its_model_error(adapter, sc, 1e-6)
     monkeypatch.setattr(ex, "CABLE_NEWTON_ATOL_FLOORS", 0.0)
     assert ex.ExudynAdapter().run(sc, EngineSettings()).status == "unstable"
 
