@@ -263,11 +263,11 @@ def contact_time(scene) -> float:
     t_plate = plate_times(scene).t_m
     if getattr(scene.target, "kind", "") not in ("beam", "modal", "plate"):
         return t_plate
-    from impactval.engines.chain import _continuum_metrics
+    from impactval.engines.chain import continuum_metrics
     from impactval.errors import ImpactvalError
 
     try:
-        t_first = _continuum_metrics(scene)[0]
+        t_first = continuum_metrics(scene)[0]
     except ImpactvalError:
         return t_plate
     return t_first if 0.0 < t_first < SHORT_CONTACT_FRACTION * t_plate else t_plate

@@ -213,7 +213,9 @@ class ChainModelError:
 
 
 @lru_cache(maxsize=8)
-def _continuum_metrics(scene) -> tuple[float, float, float]:
+def continuum_metrics(scene) -> tuple[float, float, float]:
+    """(t_m [s], f_m [N], delta_m [m]) of the continuum reference at MODEL_ERROR_REF_TOL, cached per process: what
+    the engines' model errors and the automatic step (`base.contact_time`) compare with."""
     from impactval.reference.solve import solve
 
     r = solve(scene, tol=MODEL_ERROR_REF_TOL)
@@ -228,7 +230,7 @@ def model_error(scene, chain: HenckyChain) -> ChainModelError:
     ball = scene.ball
     run, _ = solve_modes(chain.modes(), ball.mass, scene.alpha, ball.velocity, MODEL_ERROR_REF_TOL)
     m = run.metrics
-    t, f, d = _continuum_metrics(scene)
+    t, f, d = continuum_metrics(scene)
     return ChainModelError(m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0)
 
 

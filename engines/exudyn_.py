@@ -519,7 +519,7 @@ class ExudynAdapter(EngineAdapter):
                           build_s=build_s, step_s=step_s, n_steps=max(len(t) - 1, 0), model=model, diagnostics=diag,
                           settings=used)
 
-    def _solver_settings(self, exu, settings: EngineSettings, plate, window: float, cable=None):
+    def _solver_settings(self, exu, settings: EngineSettings, plate, window: float, cable_mesh=None):
         s = exu.SimulationSettings()
         ti = s.timeIntegration
         ti.verboseMode = 0
@@ -544,13 +544,13 @@ class ExudynAdapter(EngineAdapter):
             ti.initialStepSize = settings.dt * 1e-2
         else:
             ti.minimumStepSize = min(ti.minimumStepSize, settings.dt * 1e-3)
-        if cable is not None:
+        if cable_mesh is not None:      # the ANCF mesh (fe-beam)
             # ANCF coordinates are absolute (x ~ L): the residual's round-off floor is ~EA/l * L * 1e-16, about 1e-8
             # of the initial residual at 100+ elements, where Newton's default relTol 1e-8 cannot be met (measured: the
             # solver aborts); 1e-6 is reached in two iterations and changes no metric (< 1e-5 %, tested)
             ti.newton.relativeTolerance = CABLE_NEWTON_RTOL
             ti.newton.absoluteTolerance = max(ti.newton.absoluteTolerance,
-                                              CABLE_NEWTON_ATOL_FLOORS * cable_residual_floor(cable))
+                                              CABLE_NEWTON_ATOL_FLOORS * cable_residual_floor(cable_mesh))
             s.linearSolver.solverType = exu.LinearSolverType.EigenSparse
         return s, getattr(exu.DynamicSolverType, SOLVERS[integrator])
 
@@ -664,7 +664,7 @@ def _law_numbers(scene, settings: EngineSettings) -> tuple[float, float]:
 def modal_model_error(scene, structure) -> tuple[float, float, float]:
     """Signed relative errors on t_m, f_m, delta_m of the body's own modes (no residual) against the
     continuum: the reference solver on `structure`'s modes (engines.chain's method for modal bodies)."""
-    from impactval.engines.chain import MODEL_ERROR_REF_TOL, _continuum_metrics
+    from impactval.engines.chain import MODEL_ERROR_REF_TOL, continuum_metrics
     from impactval.reference.beams import Modes
     from impactval.reference.solve import solve_modes
 
@@ -673,7 +673,7 @@ def modal_model_error(scene, structure) -> tuple[float, float, float]:
     run, _ = solve_modes(Modes(np.asarray(structure.omega, float), mm, np.asarray(structure.phi_contact, float), 0.0),
                          ball.mass, scene.alpha, ball.velocity, MODEL_ERROR_REF_TOL)
     m = run.metrics
-    t, f, d = _continuum_metrics(scene)
+    t, f, d = continuum_metrics(scene)
     return m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0
 
 

@@ -81,6 +81,15 @@ def _hermite(l: float):
     return kb, ka, m
 
 
+def _along(shape: np.ndarray, pos: np.ndarray, slope: np.ndarray, lengths: np.ndarray, order: int) -> np.ndarray:
+    """d^order r / dx^order of one centreline coordinate at every element's Gauss points (samples x elements x
+    points), from its node values `pos` and slopes `slope` (samples x nodes) and the Hermite cubics' derivatives
+    `shape` in xi (4 x points) on elements of `lengths` [m]."""
+    l = lengths[None, :, None]
+    return (shape[0] * pos[:, :-1, None] + shape[1] * l * slope[:, :-1, None] + shape[2] * pos[:, 1:, None]
+            + shape[3] * l * slope[:, 1:, None]) / l**order
+
+
 @dataclass(frozen=True)
 class HermiteBeam:
     """An ANCF cable mesh of a beam: `xs` node positions [m], `impact_node`; flexural rigidity `ei` [N m^2],
@@ -148,22 +157,13 @@ class HermiteBeam:
             ry = c[:, :, 1]
             sx = 1.0 + c[:, :, 2]
             sy = c[:, :, 3]
-            energy = np.zeros(c.shape[0])
-            # per element e (nodes e, e + 1) and Gauss point g: r' = d r / dx, r'' = d^2 r / dx^2
-            l = lengths[None, :, None]
-
-            def deriv(sh, order):
-                return [(sh[0] * p0[:, :-1, None] + sh[1] * l * t0[:, :-1, None] + sh[2] * p0[:, 1:, None]
-                         + sh[3] * l * t0[:, 1:, None]) / l**order for p0, t0 in ((rx, sx), (ry, sy))]
-
-            d1x, d1y = deriv(sh1, 1)
-            d2x, d2y = deriv(sh2, 2)
+            d1x, d2x = _along(sh1, rx, sx, lengths, 1), _along(sh2, rx, sx, lengths, 2)
+            d1y, d2y = _along(sh1, ry, sy, lengths, 1), _along(sh2, ry, sy, lengths, 2)
             norm = np.sqrt(d1x * d1x + d1y * d1y)
             eps = norm - 1.0
             kappa = (d1x * d2y - d1y * d2x) / norm**3
             dens = 0.5 * (self.ea * eps * eps + self.ei * kappa * kappa)
-            energy = np.einsum("seg,g,e->s", dens, wt, lengths)
-            out[lo:lo + chunk] = energy
+            out[lo:lo + chunk] = np.einsum("seg,g,e->s", dens, wt, lengths)
         return out
 
     @lru_cache(maxsize=4)
@@ -260,7 +260,7 @@ def model_error(scene, mesh: HermiteBeam) -> tuple[float, float, float]:
     """Signed relative errors on t_m, f_m, delta_m of the mesh as a model: the reference solver on the
     mesh's exact modes (those up to w = MODEL_ERROR_W_MAX, the rest as their residual static flexibility)
     against the continuum reference, both at MODEL_ERROR_REF_TOL."""
-    from impactval.engines.chain import _continuum_metrics
+    from impactval.engines.chain import continuum_metrics
     from impactval.reference.beams import truncate_modes
     from impactval.reference.hertz import plate_impact
     from impactval.reference.solve import solve_modes
@@ -272,7 +272,7 @@ def model_error(scene, mesh: HermiteBeam) -> tuple[float, float, float]:
     md = truncate_modes(md, keep, residual=True)
     run, _ = solve_modes(md, ball.mass, scene.alpha, ball.velocity, MODEL_ERROR_REF_TOL)
     m = run.metrics
-    t, f, d = _continuum_metrics(scene)
+    t, f, d = continuum_metrics(scene)
     return m.t_m / t - 1.0, m.f_m / f - 1.0, m.delta_m / d - 1.0
 
 
