@@ -65,6 +65,7 @@ for every solver (the frame is fixed, so this changes nothing physical).
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -188,16 +189,23 @@ def default_modes(scene, tol: float = DEFAULT_MODE_TOL, cap: int = MAX_DEFAULT_M
     43 for the worked beam), at least 4 and at most `cap` (MAX_DEFAULT_MODES for the solid,
     MAX_REFERENCE_MODES for the reference-modes body).
     """
-    from impactval.reference.modechoice import required_modes
-
     target = scene.target
     if getattr(target, "modes", None):
         return int(target.modes)
     # the table of exact modes is capped at TABLE_PER_CAP x cap (the rest static): a Timoshenko beam's frequencies
     # grow like n, not n^2, so the full table (up to W_TABLE) of a stubby Timoshenko cantilever ran to 4096+ modes
     # at O(n^2) each (> 10 min: the native job timed out at 600 s); the count only matters up to `cap`
-    n = required_modes(scene, tol, max_modes=TABLE_PER_CAP * cap).count_without_residual
-    return int(min(max(n, 4), cap))
+    return int(min(max(required_count(scene, tol, cap), 4), cap))
+
+
+@functools.lru_cache(maxsize=64)
+def required_count(scene, tol: float = DEFAULT_MODE_TOL, cap: int = MAX_DEFAULT_MODES) -> int:
+    """`default_modes`' criterion before its cap: the plain mode count the scene needs at `tol` (its table of exact
+    modes holds TABLE_PER_CAP x cap; beyond, the count is the criterion's extrapolation). Cached per scene (~1 s on a
+    long Timoshenko beam)."""
+    from impactval.reference.modechoice import required_modes
+
+    return int(required_modes(scene, tol, max_modes=TABLE_PER_CAP * cap).count_without_residual)
 
 
 #: exact modes in default_modes' table per mode of its cap
@@ -334,9 +342,11 @@ class ExudynAdapter(EngineAdapter):
                               f"the engine default for exudyn (sweep: --segments pybullet.11,pybullet.35 sizes PyBullet only).")
         if kind == "reference-modes":
             n = settings.modes or default_modes(scene, mode_tol, MAX_REFERENCE_MODES)
-            return _reference_modes_structure(target, n)
-        n = settings.modes or default_modes(scene, mode_tol)
-        capped = settings.modes is None and n > MAX_DEFAULT_MODES
+            s = _reference_modes_structure(target, n)
+            _note_mode_cap(s, scene, settings, n, mode_tol, MAX_REFERENCE_MODES, "reference-modes body")
+            return s
+        n = settings.modes or default_modes(scene, mode_tol, MAX_DEFAULT_MODES)
+        capped = settings.modes is None and bool(getattr(target, "modes", None)) and n > MAX_DEFAULT_MODES
         if capped:      # the scene's own `modes` (the reference's model): the solid's FE build grows fast with it
             n = MAX_DEFAULT_MODES         # (a user's wide glass beam with modes = 160: no result within 600 s; 60: 42 s)
         s = _fem_structure(target, n, settings.option("fe_elements"), settings.option("cache", True))
@@ -345,6 +355,9 @@ class ExudynAdapter(EngineAdapter):
                 f"solid beam capped at {n} modes (the scene sets {target.modes}; the FE build grows fast with the "
                 f"count): its model error holds the truncation; --modes {target.modes} matches the scene, option "
                 f"beam_model=reference-modes too without an FE build")
+        else:
+            _note_mode_cap(s, scene, settings, n, mode_tol, MAX_DEFAULT_MODES, "solid beam",
+                           f"option beam_model=reference-modes (up to {MAX_REFERENCE_MODES} modes without an FE build)")
         return s
 
     def structure_frequencies(self, scene, settings: EngineSettings) -> np.ndarray:
@@ -648,6 +661,21 @@ class ExudynAdapter(EngineAdapter):
                                                       stiffness=stiffness, damping=float(settings.option("contact_damping", 0.0)),
                                                       springForceUserFunction=uf))
         return f"ObjectConnectorSpringDamper ({kind} user function)"
+
+
+def _note_mode_cap(structure: _Structure, scene, settings: EngineSettings, n: int, mode_tol: float, cap: int,
+                   what: str, other: str = "") -> None:
+    """A validity note on a modal body whose automatic mode count stopped at its cap below what the mode criterion
+    asks for at mode_tol (its model error, reported with the row, then holds the truncation)."""
+    if settings.modes is not None or getattr(scene.target, "modes", None) or n < cap:
+        return
+    need = required_count(scene, mode_tol, cap)
+    if need <= cap:
+        return
+    more = f"more than {TABLE_PER_CAP * cap}" if need > TABLE_PER_CAP * cap else str(need)
+    structure.diagnostics.setdefault("validity", []).append(
+        f"{what} capped at {n} modes, the most chosen automatically (the mode criterion asks for {more} at mode_tol "
+        f"{mode_tol:g}): its model error holds the truncation; give --modes" + (f", or {other}" if other else ""))
 
 
 def _law_numbers(scene, settings: EngineSettings) -> tuple[float, float]:

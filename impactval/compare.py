@@ -48,6 +48,48 @@ def curve_error(result: ImpactResult, ref: ImpactResult) -> float:
     return float(math.sqrt(trapezoid(diff2, t) / span) / ref.f_m)
 
 
+#: a first contact whose force falls below this fraction of its f_m next to the other side's separation is cut
+#: differently by a small difference in the force: near-grazing, t_m compares two different contacts
+GRAZING_FRACTION = 0.02
+#: how far from the other side's separation [fraction of the reference's t_m] the dip is looked for
+GRAZING_WINDOW = 0.05
+
+
+def contact_cut(result: ImpactResult, ref: ImpactResult) -> str:
+    """"" or one line when t_m compares differently cut first contacts (engine vs reference): the engine's contact
+    goes on past the reference's separation though its force fell below GRAZING_FRACTION of its f_m next to it (it
+    bridged a separation the reference makes, e.g. a ball that re-touches a ringing beam 15 us later), or it ends
+    where the reference's force dips below GRAZING_FRACTION of f_m without separating (it split the contact). Near-
+    grazing, a force difference of a few percent moves t_m by a whole re-contact; f_m, delta_m and the curve are not
+    affected."""
+    if not (result.contacts and ref.contacts and result.t.size and ref.t.size):
+        return ""
+    t_eng, t_ref = result.contacts[0].t_end, ref.contacts[0].t_end
+    if not (math.isfinite(t_eng) and math.isfinite(t_ref) and ref.t_m > 0):
+        return ""
+    if abs(t_eng - t_ref) <= GRAZING_WINDOW * ref.t_m:
+        return ""
+    later = t_eng > t_ref
+    side, at = (result, t_ref) if later else (ref, t_eng)     # whose force to look into, and next to which time
+    t, f = np.asarray(side.t, float), np.asarray(side.f, float)
+    near = (t >= at - GRAZING_WINDOW * ref.t_m) & (t <= at + GRAZING_WINDOW * ref.t_m) & (t < side.contacts[0].t_end)
+    f_m = side.contacts[0].f_max
+    if not near.any() or not (math.isfinite(f_m) and f_m > 0):
+        return ""
+    k = int(np.flatnonzero(near)[np.argmin(f[near])])
+    low = f[k] / f_m
+    if low >= GRAZING_FRACTION:
+        return ""
+    if later:
+        what = (f"its force fell to {100 * low:.2g} % of its f_m at {t[k]:.4g} s, next to the reference's separation "
+                f"at {t_ref:.4g} s, and rose again: it bridged a separation the reference makes")
+    else:
+        what = (f"it separated at {t_eng:.4g} s, where the reference's force falls to {100 * low:.2g} % of f_m "
+                f"({t[k]:.4g} s) and rises again: it split a contact the reference keeps")
+    return (f"t_m compares differently cut contacts ({what}); near-grazing, a small force difference moves t_m by a "
+            f"whole re-contact: read f_m, delta_m and the curve")
+
+
 # ---------------------------------------------------------------------------- where the error comes from
 METRICS = ("t_m", "f_m", "delta_m")
 

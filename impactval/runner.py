@@ -27,8 +27,8 @@ from typing import Any, Callable, Iterable, Mapping
 
 import pandas as pd
 
-from impactval.compare import (METRICS, NO_REFERENCE, curve_error, error_split, relative_errors, structure_errors,
-                               vs_mujoco_c)
+from impactval.compare import (METRICS, NO_REFERENCE, contact_cut, curve_error, error_split, relative_errors,
+                               structure_errors, vs_mujoco_c)
 from impactval.engines import ENGINE_MODULES, ENGINES
 from impactval.engines.base import EngineSettings
 from impactval.errors import EngineError, ImpactvalError
@@ -253,7 +253,11 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
                        lin_err_curve=curve_error(res, lin))
     if res.success:
         notes = row_notes(res, err if hertz else lin_err, structure, hertz or any(map(math.isfinite, lin_err.values())),
-                          against="the Hertz reference" if hertz else "the linear theory")
+                          against="the Hertz reference" if hertz else "the linear theory",
+                          reference_validity=tuple(ref.validity or ()) if ref.success else ())
+        cut = contact_cut(res, ref) if ref.success else ""
+        if cut:
+            notes.append(cut)
         if not ref.success:
             notes.insert(0, f"{NO_REFERENCE}: {ref.message}")
         if notes:
@@ -266,12 +270,13 @@ UNEXPLAINED_ERROR = 5e-3
 
 
 def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, float], check: bool,
-              against: str = "the Hertz reference") -> list[str]:
+              against: str = "the Hertz reference", reference_validity: tuple[str, ...] = ()) -> list[str]:
     """Validity notes of a row with a result (its `message`, shown with the row): the result's `validity`, the
     adapter's `diagnostics["validity"]` (a string or a list), and, when `check`, every metric whose error `err`
     (against the Hertz reference, or the linear theory for a linear law) exceeds the model's own estimate
     (`structure_err`, else `model_error`) by more than UNEXPLAINED_ERROR: such an error is not the structure
-    model's, so it is the time step, the integrator or the engine (never silent)."""
+    model's, so it is the time step, the integrator or the engine (never silent), or, where the reference's own
+    `reference_validity` says the structure deflects beyond its linear theory, that theory (named first)."""
     notes = [str(v) for v in (res.validity or ())]
     extra = (res.diagnostics or {}).get("validity")
     notes += [extra] if isinstance(extra, str) else [str(v) for v in (extra or ())]
@@ -299,6 +304,10 @@ def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, flo
                      f"the structure model under this spring (its estimate is measured with Hertz contact: a coarse "
                      f"or capped model can be further off under a linear spring, see a sizing note), the time step "
                      f"(dt = {_num(res.dt):.3g} s), the integrator or the engine; try more segments or a smaller --dt")
+            if any(str(v).startswith("small deflection") for v in reference_validity):
+                cause = (f"the reference's linear structure theory (the target deflects beyond small deflection: "
+                         f"engines whose structures are geometrically nonlinear differ from it, see the reference's "
+                         f"warning), or {cause}")
             notes.append(f"error against {against} beyond {est} by more than {100 * UNEXPLAINED_ERROR:g} % "
                          f"({', '.join(worst)}): {cause}")
     return list(dict.fromkeys(n for n in notes if n))

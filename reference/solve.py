@@ -24,7 +24,7 @@ from impactval.reference import kernel
 from impactval.reference.beams import Modes, beam_modes
 from impactval.reference.hertz import plate_impact
 from impactval.reference.result import Contact, ImpactResult, Metrics, Status, build
-from impactval.reference.validity import hertz_validity
+from impactval.reference.validity import deflection_limit, deflection_validity, hertz_validity
 
 #: polynomial degree of the force interpolation (order of the scheme: P_DEGREE + 1)
 P_DEGREE = 5
@@ -245,7 +245,7 @@ def _solve_series(modes: Modes, mass: float, alpha: float, v0: float, tol: float
     """solve_modes' kernel call and refusals: (t, delta, f, x_ball, u_ball, energy series, contact table rows
     (t_start, t_end, delta_max), relative uncertainty, index of the node ending the first contact, largest
     |E/E0 - 1|, x_structure = x_ball - delta series). The series are rows (views) of one array."""
-    series, fine, rel, end, drift = _run_kernel(_kernel_args(modes, mass, alpha, v0, tol, window, series_samples))
+    series, fine, rel, end, drift, _ = _run_kernel(_kernel_args(modes, mass, alpha, v0, tol, window, series_samples))
     t, d, f, x, u, e, xs = series
     return t, d, f, x, u, e, fine, rel, end, drift, xs
 
@@ -270,8 +270,8 @@ def _kernel_args(modes: Modes, mass: float, alpha: float, v0: float, tol: float,
 def _run_kernel(args: tuple):
     """The kernel call on `_kernel_args`' arguments and its refusals: (series [7, nodes]: t, delta, f, x_ball, u_ball,
     energy, x_structure; contact table rows (t_start, t_end, delta_max); relative uncertainty; index of the node
-    ending the first contact; largest |E/E0 - 1|)."""
-    st, cnt, series, fine, rel, n, end, drift = kernel.solve_auto_packed(*args)
+    ending the first contact; largest |E/E0 - 1|; largest |x_structure| [m])."""
+    st, cnt, series, fine, rel, n, end, drift, w_max = kernel.solve_auto_packed(*args)
     if st != kernel.STATUS_OK:
         omega, mass, window, t_plate = args[0], args[3], args[8], args[9]
         t = series[0]
@@ -287,7 +287,7 @@ def _run_kernel(args: tuple):
                    f"softer than the contact (ball mass {mass:.3g} kg); refused to stay within memory: use a lighter "
                    f"ball, a stiffer target or a looser tol")
         raise ImpactvalError(f"the first contact needs more than {cap} steps {why}")
-    return series, fine, rel, end, drift
+    return series, fine, rel, end, drift, w_max
 
 
 #: most nodes a windowed run may store (7 arrays, 49 bytes a node: 4e6 nodes ~ 200 MB), and most mode-steps
@@ -382,12 +382,13 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         t_m, f_m, delta_m = m.t_m, m.f_m, m.delta_m
         t, f, delta, x_ball, energy = run.t, run.f, run.delta, run.x_ball, run.energy
         x_structure = x_ball - delta
+        w_max = float(np.max(np.abs(x_structure)))
         contacts, rebound, drift, n_steps = run.contacts, run.rebound_velocity, run.energy_error, run.n_steps
     else:       # solve_modes without its Run (the same numbers, fewer objects per call)
         plan = _PLANS.get((id(scene), tol, window, fixed))
         if plan is None or plan[0] is not scene:
             plan = _plan(scene, tol, window, fixed)
-        series, table, rel, end, drift = _run_kernel(plan[2])
+        series, table, rel, end, drift, w_max = _run_kernel(plan[2])
         t, delta, f, x_ball, u, energy, x_structure = series
         n_modes = plan[1]
         contacts = tuple([Contact(a, b, alpha * c**1.5, c) for a, b, c in table.tolist()])
@@ -403,6 +404,8 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
                              f"double precision can carry (check the ball's and target's sizes, masses and "
                              f"frequencies).")
     validity = hertz_validity(scene, f_m, delta_m)
+    if w_max > deflection_limit(target):
+        validity += deflection_validity(target, w_max)
     rel = max(unc.t_m / t_m, unc.f_m / f_m, unc.delta_m / delta_m)     # _rel(unc, metrics) without a Metrics
     if rel > tol * (1 + 1e-9):
         validity += (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the mode count or step "

@@ -11,6 +11,19 @@ into `ImpactResult.validity` and are printed by `impactval reference`. The numbe
 - YIELD_P0_OVER_Y: first yield under a Hertz contact starts below the surface when the peak pressure
   p0 = 3 f_m / (2 pi a^2) reaches 1.6 Y (von Mises, nu = 0.3; Johnson 1985, sec. 6.2), for a material
   with a yield stress Y (scenarios/materials.py, or `yield_stress` in a [materials.NAME] table).
+- SMALL_DEFLECTION_EFFECT: the structure is linear (small deflection, no axial force). Where it deflects by w at
+  the impact point (the result's largest |x_structure|), it leaves out (a) large rotations, of relative size ~slope^2
+  with slope ~ 1.5 w / d (d: the impact point's distance to the nearest support; a cantilever's clamp: the slope of a
+  point-loaded beam's deflection curve next to its support, 1.5 w / d exactly for a simply supported or cantilever
+  beam loaded at its middle or tip), and (b) for a beam whose ends are held axially (a real clamp or pin; the engines'
+  beams slide at one end, as the reference assumes), membrane stretching, which stiffens it by MEMBRANE_C (w / h)^2
+  (h: its height; the first mode's shape psi with the centreline's stretch spread evenly along it:
+  6 (int psi'^2)^2 / (L int psi''^2): for sin(pi x / L) 3, for (1 - cos(2 pi x / L)) / 2 0.75); for a plate,
+  Kirchhoff's theory wants w small against the thickness t (membrane stretching of order (w / t)^2). Flagged when
+  one estimate passes 1 %: a 3 kg aluminium ball at 30.8 m/s near a clamp of a 9.8 mm clamped-clamped WC beam
+  (w / h = 0.44, slope 0.16) gave Exudyn's geometrically exact ANCF beam f_m +6.4 % with both ends held, -0.15 %
+  with one end sliding, and the Hencky chains -1.5 %; at a quarter of the speed (w / h = 0.11) +0.83 %, -0.11 % and
+  +0.07 %. The catalogue's scenes are at most 0.25 % (heavy_ball_slender_beam's membrane estimate).
 - PERTURBATION_SHIFT_MAX: a first-order result is (1 + shift) times the rigid-plate value with an error
   O(shift^2): flagged when |shift| > 10 % (error ~ 1 %), refused (NaN) when 1 + shift <= 0.
 """
@@ -22,6 +35,11 @@ HERTZ_DELTA_OVER_R = 0.01
 HERTZ_SIZE_FRACTION = 0.10
 YIELD_P0_OVER_Y = 1.6
 PERTURBATION_SHIFT_MAX = 0.10
+SMALL_DEFLECTION_EFFECT = 0.01
+#: membrane stiffening of a beam held axially at both ends, relative to its bending stiffness, per (w / h)^2
+MEMBRANE_C = {"simply-supported": 3.0, "clamped-clamped": 0.75}
+#: slope of a point-loaded beam next to its support, per w / d
+SLOPE_PER_W_OVER_D = 1.5
 
 
 def effective_radius(alpha: float, e_star: float) -> float:
@@ -108,3 +126,60 @@ def perturbation_validity(shift_t: float, shift_delta: float) -> tuple[tuple[str
         return ((f"perturbation: first-order shift of {worst} is {100 * s:+.3g} % (> {100 * PERTURBATION_SHIFT_MAX:g} "
                  f"%): its error O(shift^2) ~ {100 * s * s:.2g} %; use --model nonlinear for an exact answer"),), True
     return (), True
+
+
+def deflection_limit(target) -> float:
+    """The smallest largest-deflection [m] `deflection_validity` flags for `target` (inf for targets it does not
+    check): the check in one comparison per solve. Kept per target object when it is a frozen dataclass (all
+    scene targets are)."""
+    hit = _DEFLECTION.get(id(target))
+    if hit is not None and hit[0] is target:
+        return hit[1]
+    kind = getattr(target, "kind", "")
+    root = math.sqrt(SMALL_DEFLECTION_EFFECT)
+    if kind == "plate":
+        limit = root * target.thickness
+    elif kind == "beam":
+        x = target.impact_x
+        d = x if target.support == "cantilever" else min(x, target.length - x)
+        c = MEMBRANE_C.get(target.support, 0.0)
+        limit = min(root * d / SLOPE_PER_W_OVER_D, root * target.height / math.sqrt(c) if c > 0.0 else math.inf)
+    else:
+        limit = math.inf
+    params = getattr(type(target), "__dataclass_params__", None)
+    if params is not None and params.frozen:
+        if len(_DEFLECTION) > 256:
+            _DEFLECTION.clear()
+        _DEFLECTION[id(target)] = (target, limit)     # holds the target: its id cannot be reused while cached
+    return limit
+
+
+_DEFLECTION: dict = {}
+
+
+def deflection_validity(target, w_max: float) -> tuple[str, ...]:
+    """Warnings where the linear structure deflects too far for its theory: `w_max` [m] is the largest displacement
+    of the impact point (the result's largest |x_structure|); beams and plates only (module doc:
+    SMALL_DEFLECTION_EFFECT)."""
+    kind = getattr(target, "kind", "")
+    if kind not in ("beam", "plate") or not (math.isfinite(w_max) and w_max > 0.0):
+        return ()
+    if kind == "plate":
+        ratio = w_max / target.thickness
+        if ratio * ratio <= SMALL_DEFLECTION_EFFECT:
+            return ()
+        return (f"small deflection: the plate deflects w = {w_max:.3g} m at the impact point, {100 * ratio:.3g} % of "
+                f"its thickness {target.thickness:.3g} m: Kirchhoff's theory leaves out membrane stretching, of order "
+                f"(w/t)^2 = {100 * ratio * ratio:.2g} % of the plate's stiffness",)
+    x = target.impact_x
+    d = x if target.support == "cantilever" else min(x, target.length - x)
+    slope = SLOPE_PER_W_OVER_D * w_max / d if d > 0.0 else math.inf
+    ratio = w_max / target.height
+    membrane = MEMBRANE_C.get(target.support, 0.0) * ratio * ratio
+    if slope * slope <= SMALL_DEFLECTION_EFFECT and membrane <= SMALL_DEFLECTION_EFFECT:
+        return ()
+    held = (f"; held axially at both ends (a real {target.support} beam; the engines' beams slide at one end) it "
+            f"would stiffen by ~{100 * membrane:.2g} % (membrane stretching)" if membrane > 0.0 else "")
+    return (f"small deflection: the beam deflects w = {w_max:.3g} m at the impact point, {100 * ratio:.3g} % of its "
+            f"height {target.height:.3g} m (slope ~{slope:.2g} rad): the linear beam theory leaves out large "
+            f"rotations (~slope^2 = {100 * slope * slope:.2g} %){held}",)

@@ -21,7 +21,8 @@ LITERATURE = {
 
 def reference_record(scene, ref) -> dict[str, Any]:
     """Reference values of `scene` (t_m [s], f_m [N], delta_m [m], u_* absolute uncertainties,
-    n_contacts, modes, model) and `provenance`: one sentence naming the source of the values."""
+    n_contacts, modes, model), `provenance`: one sentence naming the source of the values, and `validity`: the
+    reference's own warnings (where the scene stretches Hertz's or the structure theory's assumptions)."""
     from impactval.reference.hertz import plate_impact
 
     unc = ref.uncertainty
@@ -56,4 +57,5 @@ def reference_record(scene, ref) -> dict[str, Any]:
         else:
             parts.append(f"literature: {source} differs by {100 * worst:.3g} % (scene changed since?)")
     rec["provenance"] = "; ".join(parts)
+    rec["validity"] = tuple(str(v) for v in (ref.validity or ()))
     return rec

@@ -308,6 +308,11 @@ def reference_section(references: pd.DataFrame) -> list[str]:
                       _int(r.get("modes")), str(r.get("provenance", ""))])
     out += _md_table(["scene", "t_m [us]", "f_m [N]", "delta_m [um]", "contacts", "modes", "provenance"], cells,
                      [False, True, True, True, True, True, False])
+    warnings = [f"- {r['scene']}: {w}" for _, r in references.iterrows()
+                for w in (r.get("validity") if isinstance(r.get("validity"), (tuple, list)) else ())]
+    if warnings:
+        out += ["", "Where a reference stretches its own assumptions (the engines are compared with it all the same; "
+                "an engine that models what the reference leaves out may differ by that much):", "", *warnings]
     return out + [""]
 
 

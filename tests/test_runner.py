@@ -225,3 +225,54 @@ def test_a_scene_whose_reference_is_refused_keeps_its_rows_and_the_run_goes_on(t
     assert any_failed(df) and not any_failed(df.iloc[[1]])
     report = (tmp_path / "report.md").read_text()
     assert "heavy_ball_slender_beam: no reference at tol 1e-12" in report
+
+
+@pytest.fixture(scope="module")
+def grazing():
+    """A 3 kg aluminium ball at 30.8 m/s near a clamp of a 250 x 25 x 9.8 mm WC beam (a random user scene): the
+    reference separates at 430 us and re-touches 15 us later. Returns (scene, first-contact reference, reference with
+    a window showing the re-contact)."""
+    from impactval.scenarios.scene import scene_from_dict
+
+    sc = scene_from_dict({"name": "grazing", "ball": {"radius": 0.064468, "velocity": 30.8, "material": "aluminium"},
+                          "target": {"kind": "beam", "material": "tungsten-carbide", "support": "clamped-clamped",
+                                     "length": 0.25031, "width": 0.025154, "height": 0.0098014, "impact_at": 0.1603}})
+    return sc, impactval.solve(sc, tol=1e-6), impactval.solve(sc, tol=1e-6, window=1e-4)
+
+
+def _bridged(ref_window, floor: float):
+    """`ref_window` with the force held at least `floor` x f_m from where the first contact's falls below it to where
+    the second's rises above it (one contact)."""
+    from dataclasses import replace
+
+    from impactval.reference.result import Contact
+
+    c1, c2 = ref_window.contacts[:2]
+    t, low = ref_window.t, ref_window.f < floor * ref_window.f_m
+    start = np.flatnonzero((t < c1.t_end) & ~low)[-1]          # the first contact's last node above the floor
+    stop = np.flatnonzero((t > c2.t_start) & ~low)[0]          # the second's first
+    f = ref_window.f.copy()
+    f[start + 1:stop] = floor * ref_window.f_m
+    return replace(ref_window, f=f, contacts=(Contact(c1.t_start, c2.t_end, c1.f_max, c1.delta_max),),
+                   t_m=c2.t_end - c1.t_start)
+
+
+def test_contact_cut_names_a_bridged_or_split_separation(grazing):
+    """t_m of a near-grazing contact: an engine whose force stays at 0.5 % of f_m through the reference's 15 us gap
+    reports one contact 13.6 % longer; the row says it bridged a separation (and, the other way round, that a contact
+    which separates where the other's force only dips was split). No note for the same contact, or for a contact that
+    ends as late without a dip (a real t_m error), or for a dip of 5 % of f_m."""
+    from impactval.compare import contact_cut
+
+    _, ref, ref_w = grazing
+    assert ref_w.contacts[1].t_start - ref.contacts[0].t_end < 0.05 * ref.t_m      # the re-contact follows closely
+    merged = _bridged(ref_w, 0.005)
+    assert merged.t_m / ref.t_m - 1 > 0.1
+    note = contact_cut(merged, ref)
+    assert "bridged a separation the reference makes" in note and "0.5 % of its f_m" in note
+    assert "split a contact the reference keeps" in contact_cut(ref, merged)
+    assert contact_cut(ref, ref) == "" and contact_cut(_bridged(ref_w, 0.05), ref) == ""
+    from dataclasses import replace
+
+    stretched = replace(ref, t=ref.t * 1.1, contacts=tuple(replace(c, t_end=c.t_end * 1.1) for c in ref.contacts))
+    assert contact_cut(stretched, ref) == ""
