@@ -72,13 +72,19 @@ def contact_cut(result: ImpactResult, ref: ImpactResult) -> str:
     later = t_eng > t_ref
     side, at = (result, t_ref) if later else (ref, t_eng)     # whose force to look into, and next to which time
     t, f = np.asarray(side.t, float), np.asarray(side.f, float)
-    near = (t >= at - GRAZING_WINDOW * ref.t_m) & (t <= at + GRAZING_WINDOW * ref.t_m) & (t < side.contacts[0].t_end)
-    f_m = side.contacts[0].f_max
+    first = side.contacts[0]
+    inside = (t > first.t_start) & (t < first.t_end)
+    near = inside & (t >= at - GRAZING_WINDOW * ref.t_m) & (t <= at + GRAZING_WINDOW * ref.t_m)
+    f_m = first.f_max
     if not near.any() or not (math.isfinite(f_m) and f_m > 0):
         return ""
     k = int(np.flatnonzero(near)[np.argmin(f[near])])
     low = f[k] / f_m
-    if low >= GRAZING_FRACTION:
+    # a dip: the force came down to it from a tenth of f_m or more and rises past the grazing level after it (not the
+    # rise at touch, nor the fall at separation)
+    before, after = f[inside & (t < t[k])], f[inside & (t > t[k])]
+    if low >= GRAZING_FRACTION or not (before.size and after.size) or before.max() < 0.1 * f_m \
+            or after.max() < GRAZING_FRACTION * f_m:
         return ""
     if later:
         what = (f"its force fell to {100 * low:.2g} % of its f_m at {t[k]:.4g} s, next to the reference's separation "
