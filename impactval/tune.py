@@ -127,7 +127,8 @@ def default_dt(scene, speeds: Sequence[float], engine: str | None = None, contac
 @dataclass(frozen=True)
 class Target:
     """The reference (Hertz) impact at one speed: `speed` [m/s], `t_m` [s], `f_m` [N], `delta_m` [m],
-    `rebound_velocity` [m/s] (the elastic truth: v0 on a rigid plate, less on a flexible target)."""
+    `rebound_velocity` [m/s] (the elastic truth: v0 on a rigid plate, less on a flexible target; for a second ball the
+    speed at which the two separate, v0: the restitution is of the relative motion, as the contact's damping is)."""
 
     speed: float
     t_m: float
@@ -151,8 +152,13 @@ def hertz_targets(scene, speeds: Sequence[float], tol: float = 1e-6) -> list[Tar
         else:
             import impactval
 
-            r = impactval.solve(at_speed(scene, v), tol=tol)
-            out.append(Target(v, r.t_m, r.f_m, r.delta_m, r.rebound_velocity))
+            sc = at_speed(scene, v)
+            r = impactval.solve(sc, tol=tol)
+            rebound = r.rebound_velocity
+            if sc.target.kind == "ball":   # ball 1's own speed away -> the separation speed (ball 2 at rest before)
+                m1, m2 = sc.ball.mass, sc.target.mass
+                rebound = (m1 * v / (m1 + m2) + rebound) * (m1 + m2) / m2
+            out.append(Target(v, r.t_m, r.f_m, r.delta_m, rebound))
     return out
 
 

@@ -146,7 +146,7 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
                    f"{r['k_equal']:.6g} | `{-r['k_equal'] / m_eff:.6g} 0` |")
     out += ["", "## Restitution", "",
             "The reference is elastic; its rebound speed over approach speed (the elastic truth, < 1 on a flexible "
-            "target where energy stays in vibration):", "", "| v0 [m/s] | reference rebound [m/s] | e |", "|---:|---:|---:|"]
+            "target where energy stays in vibration; for two balls their separation speed over approach speed):", "", "| v0 [m/s] | reference rebound [m/s] | e |", "|---:|---:|---:|"]
     for t in tuned.get("reference", []):
         out.append(f"| {t['speed']:.4g} | {_g(t['rebound_velocity'])} | {_g(t['restitution'], 5)} |")
     out += ["", "To add dissipation, model: linear spring-dashpot (Kelvin-Voigt), contact ending when the approach "

@@ -397,3 +397,19 @@ def test_tune_refuses_a_moving_second_ball(tmp_path):
     with pytest.raises(ImpactvalError, match="target.velocity") as exc:
         T.tune("mujoco", scene, [0.5, 1.0], store=str(tmp_path / "t.sqlite"))
     assert "\n" not in str(exc.value)
+
+
+def test_ball_on_ball_restitution_is_of_the_relative_motion():
+    """Two free balls are elastic: they separate as fast as they approached (e = 1), whatever the masses; a 69 mm
+    PMMA ball on a 15 mm glass ball at rest (a random user scene) was reported e = -0.96, ball 1's own velocity after
+    the contact ((m1 - m2) / (m1 + m2) of v0: it follows the light ball, closed form of the elastic collision)."""
+    from impactval.scenarios.scene import scene_from_dict
+
+    scene = scene_from_dict({"name": "pmma_on_glass", "ball": {"radius": 0.068996, "velocity": 0.1244,
+                                                                "material": "pmma"},
+                             "target": {"kind": "ball", "radius": 0.014635, "material": "glass", "velocity": 0.0}})
+    m1, m2 = scene.ball.mass, scene.target.mass
+    for t in T.hertz_targets(scene, [0.01, 0.1, 1.0]):
+        assert t.restitution == pytest.approx(1.0, rel=1e-6)
+        r = impactval.solve(T.at_speed(scene, t.speed), tol=1e-6)
+        assert -r.rebound_velocity == pytest.approx((m1 - m2) / (m1 + m2) * t.speed, rel=1e-6)
