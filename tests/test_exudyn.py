@@ -152,12 +152,20 @@ def ref_omega(sc, n):
 
 
 def test_given_modes_target(adapter):
-    """A structure given by its modes (kind = modal) as an FFRF body: matches the reference."""
+    """A structure given by its modes (kind = modal) as an FFRF body: matches the reference; its model is the scene's
+    modes exactly, so its model error is 0 (reported, as MuJoCo's oscillators report it: the row's error is all
+    numerics; it was NaN), and the reduced matrices are diag(m_n), diag(m_n omega_n^2) with the scene's phi."""
     sc = impactval.load_scene("modal_two_mode")
     ref = impactval.solve(sc)
     r = adapter.run(sc, EngineSettings(dt=1e-7, integrator="rk44"))
     assert r.status == "ok"
     assert np.all(np.abs(rel(r, (ref.t_m, ref.f_m, ref.delta_m))) <= 1e-4)
+    assert r.model_error == 0.0 and r.diagnostics["model_error_f_m"] == 0.0
+    body = adapter._structure(sc, adapter.check_settings(EngineSettings()))
+    t = sc.target
+    assert np.allclose(np.diag(body.mass_reduced), t.modal_mass, rtol=1e-15)
+    assert np.allclose(np.diag(body.stiffness_reduced), np.asarray(t.modal_mass) * np.asarray(t.omega) ** 2, rtol=1e-15)
+    assert np.allclose(body.phi_contact, t.phi, rtol=1e-15)
 
 
 # ---------------------------------------------------------------------------- beams, FE modes
