@@ -375,7 +375,13 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     fixed = modes if modes is not None else getattr(target, "modes", None)
     model = "hertz-rigid" if target.kind == "rigid-plate" else "hertz-modal"
     if target.kind in ("beam", "plate") and fixed is None:
-        run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
+        try:
+            run, unc, n_modes, trunc = _solve_auto_modes(scene, tol, window, static_correction)
+        except ImpactvalError as exc:
+            hint = _plate_travel_hint(scene) if target.kind == "plate" else ""
+            if not hint:
+                raise
+            raise ImpactvalError(f"{exc}. {hint}") from None
         unc = Metrics(unc.t_m + trunc.t_m, unc.f_m + trunc.f_m, unc.delta_m + trunc.delta_m)
         model += "+static" if static_correction else ""
         m = run.metrics
@@ -418,6 +424,21 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
         "settings": {"tol": tol, "window": window, "p": P_DEGREE}, "n_steps": n_steps, "wall_time_build_s": 0.0,
         "wall_time_step_s": time.perf_counter() - t0, "diagnostics": {}, "dt": math.nan, "dt_limit": math.nan,
         "model_error": math.nan, "contact_law": None})       # every field: build() takes the dict as it is
+
+
+def _plate_travel_hint(scene) -> str:
+    """For a refused plate scene: "" or one sentence when Zener's infinite plate (a dashpot c = 8 sqrt(D rho h) under
+    the ball) says the load point travels more than the plate's thickness, m0 v0 / c (the ball's momentum, all of it
+    passed on when lambda is large), i.e. far outside Kirchhoff's small-deflection theory."""
+    from impactval.reference.plates import infinite_plate_damping, zener_lambda
+
+    plate, m0, v0 = scene.target, scene.ball.mass, scene.ball.velocity
+    travel = m0 * v0 / infinite_plate_damping(plate)
+    if travel <= plate.thickness:
+        return ""
+    return (f"Zener's infinite plate (lambda = {zener_lambda(scene):.3g}) puts the load point's travel near m v0 / "
+            f"(8 sqrt(D rho h)) = {travel:.3g} m, {travel / plate.thickness:.3g} x the plate's thickness: far outside "
+            f"Kirchhoff's small-deflection theory; a thicker plate, or a lighter or slower ball, is within it")
 
 
 def _plan(scene, tol: float, window: float, fixed: int | None) -> tuple:
