@@ -304,10 +304,10 @@ def row_notes(res: ImpactResult, err: dict[str, float], structure: dict[str, flo
                      f"the structure model under this spring (its estimate is measured with Hertz contact: a coarse "
                      f"or capped model can be further off under a linear spring, see a sizing note), the time step "
                      f"(dt = {_num(res.dt):.3g} s), the integrator or the engine; try more segments or a smaller --dt")
-            if any(str(v).startswith("small deflection") for v in reference_validity):
-                cause = (f"the reference's linear structure theory (the target deflects beyond small deflection: "
-                         f"engines whose structures are geometrically nonlinear differ from it, see the reference's "
-                         f"warning), or {cause}")
+            bent = [str(v) for v in reference_validity if str(v).startswith("small deflection")]
+            if bent:
+                cause = (f"the reference's linear structure theory (engines whose structures are geometrically "
+                         f"nonlinear differ from it; the reference says: {bent[0]}), or {cause}")
             notes.append(f"error against {against} beyond {est} by more than {100 * UNEXPLAINED_ERROR:g} % "
                          f"({', '.join(worst)}): {cause}")
     return list(dict.fromkeys(n for n in notes if n))

@@ -424,5 +424,6 @@ def test_a_beam_bent_past_small_deflection_is_explained_in_the_run(tmp_path):
     assert row["status"] == "ok" and row["err_t_m"] > 0.1 and abs(row["err_f_m"]) < 0.005
     assert "bridged a separation the reference makes" in row["message"]
     assert "the reference's linear structure theory" in row["message"]
+    assert "the reference says: small deflection: the beam deflects w = " in row["message"]     # in the terminal too
     report = (tmp_path / "out" / "report.md").read_text()
     assert f"{sc.name}: small deflection: the beam deflects" in report
