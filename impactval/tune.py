@@ -153,12 +153,12 @@ def hertz_targets(scene, speeds: Sequence[float], tol: float = 1e-6) -> list[Tar
             import impactval
 
             sc = at_speed(scene, v)
+            if sc.target.kind == "ball":   # the relative motion: its rebound is the two balls' separation speed
+                from impactval.reference.spheres import equivalent_plate_scene
+
+                sc = equivalent_plate_scene(sc)
             r = impactval.solve(sc, tol=tol)
-            rebound = r.rebound_velocity
-            if sc.target.kind == "ball":   # ball 1's own speed away -> the separation speed (ball 2 at rest before)
-                m1, m2 = sc.ball.mass, sc.target.mass
-                rebound = (m1 * v / (m1 + m2) + rebound) * (m1 + m2) / m2
-            out.append(Target(v, r.t_m, r.f_m, r.delta_m, rebound))
+            out.append(Target(v, r.t_m, r.f_m, r.delta_m, r.rebound_velocity))
     return out
 
 
