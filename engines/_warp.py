@@ -1,5 +1,5 @@
 """Shared Warp plumbing for the Warp-based engines (MuJoCo Warp, Newton): kernel cache, CPU graph
-capture. Imported only inside adapter methods (it imports warp at top level).
+capture. Warp itself is imported by `import_warp()`, inside adapter methods; the module-level constants are not.
 
 Warp compiles every kernel module to C++ on first use (14-18 s cold on this machine) and caches the
 binaries in a directory keyed by the kernel source; from the cache a model is ready in ~0.3 s. The
@@ -15,6 +15,22 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+
+#: float32 axial noise of the Warp chains (MuJoCo Warp, Newton): the chain's motion along the beam made by rounding the x
+#: positions is kept out of the energy check; a row gets a validity note beyond AXIAL_NOISE_NOTE x the impact energy
+#: (the worked beam has 10 %, the heavy beams 1-2x at the defaults), and is unstable only beyond both AXIAL_NOISE_STOP x
+#: the impact energy and AXIAL_FLOOR_STOP x the engine's float32 floor (the noise's size, set by float32 and the chain,
+#: not by the impact: measured 0.05-342x it on 15 beams at the defaults, while a slow or small ball's impact energy can
+#: be 1e-11 J: 10 of 14 unseen beams, balls at 2 mm/s - 2.3 m/s, were stopped by the impact-energy limit alone, at
+#: 56-9.7e9x it, all within their model error once run). A blow-up past the stability limit grows far beyond both (Newton's
+#: worked beam at 1.02 of its limit: 9.8e3x the impact energy, ~1.3e5x its floor)
+AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP, AXIAL_FLOOR_STOP = 1.0, 10.0, 1e4
+
+
+def share_text(fraction: float) -> str:
+    """A share of the impact energy as '14 %' below 10x and '5.6e+04x' above (a slow ball's noise can be 1e7 %)."""
+    return f"{100 * fraction:.3g} %" if fraction < 10 else f"{fraction:.3g}x"
 
 
 def cache_dir() -> Path:
@@ -70,6 +86,58 @@ class CapturedStep:
             for _ in range(n):
                 wp.capture_launch(self.graph)
         wp.synchronize()
+
+
+#: most bytes of recorded rows a Warp run keeps on the host (the states of every step up to the window's end)
+RECORD_BUDGET_BYTES = 2 * 1024**3
+
+
+class ChunkedRecord:
+    """The rows a recording kernel writes, one per step, in a device buffer of `rows` rows that the host empties after
+    each replayed chunk: the kernel writes global row k at k - base[0] (`base`, a 1-element int array the host moves
+    on, shared by the recorders of one run), so memory is bounded by a chunk, not by the window cap (200 rigid-plate
+    contact times: a 52 mm PMMA ball at 1.4 cm/s at dt = 5e-8 s asked Newton for 29.5 GB up front and crashed).
+    `take(count)` copies the rows written since the last call (global rows done+1 .. count) to the host and returns
+    them; more than `budget` bytes kept on the host is refused (EngineError naming the step count and a larger dt)."""
+
+    def __init__(self, wp, rows: int, width: int, what: str, dt: float, budget: int | None = None,
+                 base=None) -> None:
+        self.rows, self.width, self.what, self.dt = rows, width, what, dt
+        self.budget = RECORD_BUDGET_BYTES if budget is None else budget
+        self.buffer = wp.zeros((rows, width), dtype=float, device="cpu")
+        self.base = wp.zeros(1, dtype=int, device="cpu") if base is None else base
+        self.blocks: list[np.ndarray] = []
+        self.kept = 0
+        self.done = 0
+
+    def copy(self, lo: int, hi: int, count: int) -> np.ndarray:
+        """Device rows lo .. hi-1 to the host (kept; refused beyond the budget, `count` = steps so far)."""
+        from impactval.errors import EngineError
+
+        block = self.buffer.numpy()[lo:hi].copy()
+        self.blocks.append(block)
+        self.kept += block.nbytes
+        if self.kept > self.budget:
+            raise EngineError(f"{self.what}: the run recorded {count} steps ({self.kept / 1e9:.2g} GB of states) and the "
+                              f"contact had not ended; at dt = {self.dt:.3g} s it needs more than the budget of "
+                              f"{self.budget / 1e9:.2g} GB: use a larger dt (e.g. dt = auto)")
+        return block
+
+    def advance(self, count: int) -> None:
+        """Global row count is the last one taken: the kernel writes the next one at device row 1."""
+        self.done = count
+        self.base.assign(np.array([count], dtype=np.int32))
+
+    def take(self, count: int) -> np.ndarray:
+        """Rows done+1 .. count (global), copied to the host; the device buffer is free again."""
+        block = self.copy(1, count - self.done + 1, count)
+        self.advance(count)
+        return block
+
+    def all(self, first: np.ndarray | None = None) -> np.ndarray:
+        """`first` (row 0, if given) then the rows taken so far."""
+        head = [first[None, :].astype(np.float32)] if first is not None else []
+        return np.concatenate([*head, *self.blocks])
 
 
 def window_end(samples: np.ndarray, settings, scene) -> int | None:

@@ -351,7 +351,8 @@ def _run_settings(dt, contact, integrator, segments, timeout, tail, modes=None, 
 @main.command(name="run")
 @click.argument("scene", nargs=-1)
 @click.option("--engines", "engines", default="mujoco", show_default=True,
-              help="Comma-separated engine names (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
+              help="Comma-separated engine names (mujoco, pybullet, exudyn, mujoco-warp, newton; see `impactval "
+                   "engines`) or 'package.module:Class' adapters.")
 @click.option("--dt", default="auto", show_default=True,
               help="Engine time step [s], or auto (each engine picks a step under its predicted stability limit); "
                    "several, comma-separated (1e-6,5e-7,2e-7) or a log range a:b:n (1e-5:1e-7:5), sweep speed against accuracy.")

@@ -25,7 +25,7 @@ def parse_under(text: str) -> float:
 @click.command(name="extremes")
 @click.argument("scene")
 @click.option("--engines", default="mujoco", show_default=True,
-              help="Comma-separated engines (mujoco, pybullet, exudyn) or 'package.module:Class' adapters.")
+              help="Comma-separated engines (mujoco, pybullet, exudyn, mujoco-warp, newton) or 'package.module:Class' adapters.")
 @click.option("--axis", "axes", multiple=True, metavar="NAME[=SPEC]",
               help="dt, velocity, mass_ratio, stiffness, frequency_ratio or a TOML path (ball.velocity, target.height); "
                    "SPEC = a:b:n (n log-spaced values) | a,b,c | a mix (dt may use t_m: t_m/1e4:t_m:13). Once or twice.")
