@@ -132,7 +132,7 @@ class MujocoWarpAdapter(EngineAdapter):
         return _SameModelInC().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
 
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
-        from impactval.engines._warp import CapturedStep, ChunkedRecord, import_warp, window_end
+        from impactval.engines._warp import CapturedStep, ChunkedRecord, float32_contact_note, import_warp, window_end
 
         _check_target(scene)
         t0 = time.perf_counter()
@@ -147,6 +147,10 @@ class MujocoWarpAdapter(EngineAdapter):
         run = c_model.build(scene, c_settings)
         c_model.close(run)                  # restores MuJoCo C's callbacks; the model and data stay
         mjm, mjd, lay, probe, info = run.model, run.data, run.lay, run.probe, dict(run.diagnostics)
+        # native contact: MuJoCo's own collision of the geoms' world z, at the ball's centre height top + r (refused
+        # here when float32 cannot resolve the approach; injected Hertz forms it from displacements)
+        contact_note = "" if settings.contact == "hertz" else float32_contact_note(
+            "mujoco-warp", float(lay.top) + scene.ball.radius, plate_times(scene).delta_m)
         mujoco.mj_forward(mjm, mjd)
         m = mjw.put_model(mjm)
         # the constraint solver's iteration overflows are reported in the row (diagnostics), not printed
@@ -247,6 +251,8 @@ class MujocoWarpAdapter(EngineAdapter):
                          f"compare with the C run (vs_mujoco_c)")
         if axial.size and energy.size and energy[0] > 0:
             _check_axial_noise(scene, dt, mjm, axial, energy[0], diagnostics, notes)
+        if contact_note:
+            notes.append(contact_note.removeprefix("mujoco-warp: "))
         if lay.kind == "beam":
             diagnostics["segments"] = lay.n_segments
             diagnostics["chain_root"] = settings.option("chain_root", "middle")

@@ -79,7 +79,8 @@ ATTACH_KE = 1e9
 #: reported (diagnostics axial_noise_energy, relative to the impact energy) with a validity note beyond
 #: AXIAL_NOISE_NOTE, and a run is unstable beyond both AXIAL_NOISE_STOP x the impact energy and AXIAL_FLOOR_STOP x
 #: its float32 floor N attach_ke ulp(L/2)^2 (`axial_noise_floor`; the limits shared with MuJoCo Warp, engines/_warp.py)
-from impactval.engines._warp import AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP, share_text  # noqa: E402
+from impactval.engines._warp import (AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP,  # noqa: E402
+                                     float32_contact_note, share_text)
 #: a predicted model_error beyond this (the beam bar of issue 19, the MuJoCo C chain's) heads the row's validity
 MODEL_ERROR_BAR = 0.015
 #: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
@@ -401,6 +402,10 @@ class NewtonAdapter(EngineAdapter):
 
         integ = settings.integrator or INTEGRATORS[0]
         model, lay = self.build(scene, settings, wp, newton)
+        # native contact: Newton's shapes at their real height, the ball's position integrated there (refused here
+        # when float32 cannot resolve it; injected Hertz reads displacements near z = 0)
+        contact_note = "" if settings.contact == "hertz" else float32_contact_note(
+            "newton", lay["z0"], _plate_delta_m(scene), scene.ball.velocity * float(settings.dt))
         if integ == "semi-implicit":
             lay["attach_ke"] = self.attach_ke(scene, settings)
             solver = newton.solvers.SolverSemiImplicit(model, angular_damping=0.0, joint_attach_ke=lay["attach_ke"],
@@ -481,7 +486,7 @@ class NewtonAdapter(EngineAdapter):
                        "contact_law": "hertz, injected into body_f" if hertz else "linear penalty ke = k0, kd = 0"}
         if integ == "semi-implicit":
             diagnostics["attach_ke"] = lay["attach_ke"]
-        validity = ()
+        validity = (contact_note,) if contact_note else ()
         if lay["segments"] and energy[0] > 0:
             # float32 rounding noise in the joints' axial springs, outside the checked energy (AXIAL_NOISE_STOP)
             noise = float(np.max(axial) / energy[0])
@@ -497,7 +502,7 @@ class NewtonAdapter(EngineAdapter):
                                      f"float32 floor N attach_ke ulp(L/2)^2 (limits {self.axial_noise_stop:g}x and "
                                      f"{self.axial_floor_stop:g}x; attach_ke {ke:.3g} N/m)", diagnostics)
             if noise > AXIAL_NOISE_NOTE:
-                validity = (f"newton: float32 rounding of the joints' x positions put {share_text(noise)} of the impact "
+                validity += (f"newton: float32 rounding of the joints' x positions put {share_text(noise)} of the impact "
                             f"energy into the chain's axial vibration (attach_ke {ke:.3g} N/m); the contact "
                             f"does not see it and the energy check uses the rest (docs/newton.md)",)
         if lay["segments"]:
