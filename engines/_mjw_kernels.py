@@ -62,10 +62,10 @@ def hertz_passive(body_rootid: wp.array(dtype=int), body_isdofancestor: wp.array
 
 
 @wp.kernel
-def record(site_xpos: wp.array2d(dtype=wp.vec3), energy: wp.array(dtype=wp.vec2),
+def record(energy: wp.array(dtype=wp.vec2),
            qpos: wp.array2d(dtype=float), qvel: wp.array2d(dtype=float),
            nacon: wp.array(dtype=int), efc_address: wp.array2d(dtype=int), efc_force: wp.array2d(dtype=float),
-           tip_site: int, hit_site: int, hit_top: float, alpha: float, native: int, nv: int, nq: int,
+           alpha: float, native: int, nv: int, nq: int,
            xpos: wp.array2d(dtype=wp.vec3), xquat: wp.array2d(dtype=wp.quat), hit_body: int, hit_local: wp.vec3,
            hit_z0: float, ball_q: int, ball_sign: float, ball_q0: float, ball_prev: wp.array(dtype=float),
            offset: int, counter: wp.array(dtype=int), base: wp.array(dtype=int), samples: wp.array2d(dtype=float),

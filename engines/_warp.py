@@ -69,6 +69,13 @@ def float32_contact_note(engine: str, z_contact: float, delta_m: float, step: fl
     return text
 
 
+def axial_noise_blows_up(noise_j: float, impact_energy: float, floor_j: float, stop: float = AXIAL_NOISE_STOP,
+                         floor_stop: float = AXIAL_FLOOR_STOP) -> bool:
+    """True when the axial noise `noise_j` [J] is beyond both `stop` x the impact energy [J] and `floor_stop` x the
+    engine's float32 floor [J]: a blow-up, not rounding (the rule of both Warp engines)."""
+    return not (noise_j <= stop * impact_energy or noise_j <= floor_stop * floor_j)
+
+
 def share_text(fraction: float) -> str:
     """A share of the impact energy as '14 %' below 10x and '5.6e+04x' above (a slow ball's noise can be 1e7 %)."""
     return f"{100 * fraction:.3g} %" if fraction < 10 else f"{fraction:.3g}x"

@@ -193,9 +193,9 @@ class MujocoWarpAdapter(EngineAdapter):
         states0 = np.concatenate([mjd.qpos, mjd.qvel]).astype(np.float32)
         rk4 = (settings.integrator or INTEGRATORS[0]) == "RK4"
         offset = 1 if rk4 else 0
-        rec_args = [d.site_xpos, d.energy, d.qpos, d.qvel, d.nacon, d.contact.efc_address, d.efc.force,
-                    probe.tip, probe.hit, float(lay.top), float(scene.alpha), int(native), nv, nq, *disp_args[:2], *disp_args[3:],
-                    wp.array([disp_args[-1]], dtype=float, device="cpu"), offset]
+        rec_args = [d.energy, d.qpos, d.qvel, d.nacon, d.contact.efc_address, d.efc.force, float(scene.alpha),
+                    int(native), nv, nq, *disp_args[:2], *disp_args[3:], wp.array([disp_args[-1]], dtype=float, device="cpu"),
+                    offset]
         if rk4:                              # sample 0 from a forward pass at t = 0
             mjw.forward(m, d)
             first = wp.array([-1], dtype=int, device="cpu")
@@ -347,7 +347,8 @@ def _check_axial_noise(scene, dt: float, mjm, axial: np.ndarray, impact_energy: 
     within 0.18 % and f_m within 0.08 % of MuJoCo C). Kept out of the energy check, reported as axial_noise_energy
     (relative to the impact energy) with a note beyond AXIAL_NOISE_NOTE; a run beyond both AXIAL_NOISE_STOP x the
     impact energy and AXIAL_FLOOR_STOP x the float32 floor 1/2 m_beam (ulp(L)/dt)^2 is unstable (a blow-up)."""
-    from impactval.engines._warp import AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP, share_text
+    from impactval.engines._warp import (AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP, axial_noise_blows_up,
+                                         share_text)
     from impactval.engines.base import EngineDiverged
 
     target = scene.target
@@ -358,7 +359,7 @@ def _check_axial_noise(scene, dt: float, mjm, axial: np.ndarray, impact_energy: 
     noise = noise_j / impact_energy
     diagnostics["axial_noise_energy"] = noise
     diagnostics["axial_noise_floor_J"] = floor
-    if not (noise <= AXIAL_NOISE_STOP or noise_j <= AXIAL_FLOOR_STOP * floor):
+    if axial_noise_blows_up(noise_j, impact_energy, floor):
         raise EngineDiverged(f"float32 axial noise: the chain's motion along the beam reached {noise:.3g}x the impact "
                              f"energy and {noise_j / floor:.3g}x its float32 floor 1/2 m (ulp(L)/dt)^2 (limits "
                              f"{AXIAL_NOISE_STOP:g}x and {AXIAL_FLOOR_STOP:g}x)", diagnostics)
