@@ -206,3 +206,43 @@ def window_end(samples: np.ndarray, settings, scene) -> int | None:
         return None
     last = first + int(ends[0]) + int(math.ceil(settings.tail / float(settings.dt)))
     return last if last < len(delta) else None
+
+
+class WindowTracker:
+    """`window_end` over a series that arrives in blocks (one per replayed chunk), each sample looked at once: after
+    every `feed` it returns what `window_end` would return on all the samples fed so far. (The adapters called
+    `window_end` on the whole series after each 64-step chunk: quadratic in the chunk count, ~N^2/128 sample visits for
+    N steps, which a long --tail turns into minutes.)"""
+
+    def __init__(self, settings, scene) -> None:
+        self.radius = scene.ball.radius
+        self.tail_steps = int(math.ceil(settings.tail / float(settings.dt)))
+        self.count = 0                  # samples fed so far
+        self.first: int | None = None   # first sample with f > 0
+        self.last: int | None = None    # the window's last sample, once the first contact has ended
+        self.bad: int | None = None     # first non-finite sample or ball through the target
+
+    def feed(self, samples: np.ndarray) -> int | None:
+        """Add the next block (rows of delta [m], force [N]); the window's last sample index, or None while open."""
+        start, n = self.count, len(samples)
+        self.count += n
+        if self.bad is not None:
+            return self.bad
+        if n:
+            delta, f = samples[:, 0], samples[:, 1]
+            bad = ~np.isfinite(delta) | ~np.isfinite(f) | (delta > self.radius)
+            if bad.any():
+                self.bad = start + int(np.argmax(bad))
+                return self.bad
+            if self.last is None:
+                on = f > 0
+                lo = 0
+                if self.first is None:
+                    if on.any():
+                        lo = int(np.argmax(on))
+                        self.first = start + lo
+                if self.first is not None:
+                    ends = np.flatnonzero(~on[lo:] & (delta[lo:] <= 0))
+                    if ends.size:
+                        self.last = start + lo + int(ends[0]) + self.tail_steps
+        return self.last if self.last is not None and self.last < self.count else None

@@ -132,7 +132,7 @@ class MujocoWarpAdapter(EngineAdapter):
         return _SameModelInC().structure_frequencies(scene, self.c_settings(scene, self.check_settings(settings)))
 
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
-        from impactval.engines._warp import CapturedStep, ChunkedRecord, float32_contact_note, import_warp, window_end
+        from impactval.engines._warp import CapturedStep, ChunkedRecord, WindowTracker, float32_contact_note, import_warp
 
         _check_target(scene)
         t0 = time.perf_counter()
@@ -215,6 +215,7 @@ class MujocoWarpAdapter(EngineAdapter):
         step_s, n_steps = 0.0, 1
         ball_q = probe.ball_qpos
         end = None
+        window = WindowTracker(settings, scene)      # the window rule, each sample looked at once
         while n_steps < n_max and end is None:
             n = min(chunk, n_max - n_steps)
             ts = time.perf_counter()
@@ -224,9 +225,9 @@ class MujocoWarpAdapter(EngineAdapter):
             chunk = CHUNK
             count, done = int(counter.numpy()[0]), st_rec.done
             # samples of global index done + offset .. count - 1 + offset (RK4's sample 0 with the first chunk)
-            sm_rec.copy(0 if (offset == 0 or done == 0) else 1, count - done + offset, count)
+            block = sm_rec.copy(0 if (offset == 0 or done == 0) else 1, count - done + offset, count)
             st_rec.take(count)
-            end = window_end(sm_rec.all(), settings, scene)
+            end = window.feed(block)
         n_steps = int(counter.numpy()[0])
         n_rec = n_steps + offset                       # samples: one per step start (+ the end for RK4)
         if end is not None:

@@ -400,7 +400,7 @@ class NewtonAdapter(EngineAdapter):
 
     # ------------------------------------------------------------------ stepping
     def simulate(self, scene, settings: EngineSettings) -> Simulation:
-        from impactval.engines._warp import CapturedStep, ChunkedRecord, import_warp, window_end
+        from impactval.engines._warp import CapturedStep, ChunkedRecord, WindowTracker, import_warp
 
         t0 = time.perf_counter()
         wp = import_warp()
@@ -466,7 +466,8 @@ class NewtonAdapter(EngineAdapter):
         step_s, n_steps = 0.0, 2
         chunk = first_chunk
         end = None
-        parts = [np.column_stack(self._series(first[None, :], first, lay, scene, nb)[:2])]    # (delta, f) per step
+        window = WindowTracker(settings, scene)     # the window rule on (delta, f) per step, each looked at once
+        window.feed(np.column_stack(self._series(first[None, :], first, lay, scene, nb)[:2]))
         while n_steps < n_max and end is None:
             n = max(1, min(chunk, n_max - n_steps) // 2)
             ts = time.perf_counter()
@@ -475,8 +476,8 @@ class NewtonAdapter(EngineAdapter):
             n_steps += 2 * n
             chunk = CHUNK
             block = rec.take(int(counter.numpy()[0]))
-            parts.append(np.column_stack(self._series(np.vstack([first[None, :], block]), first, lay, scene, nb)[:2])[1:])
-            end = window_end(np.concatenate(parts), settings, scene)
+            end = window.feed(np.column_stack(self._series(np.vstack([first[None, :], block]), first, lay, scene,
+                                                           nb)[:2])[1:])
         n_stepped = int(counter.numpy()[0])        # steps run (stepping wall time covers all of them)
         n_rec = n_stepped
         if end is not None:
