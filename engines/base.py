@@ -477,8 +477,10 @@ class EngineAdapter:
         if e.size and e[0] > 0:
             growth = float(np.max(e) / e[0] - 1.0)
             if sim.stop == "energy" or growth > self.energy_growth_limit or not np.all(np.isfinite(e)):
-                return failed("energy", growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt,
-                              limit=lim)
+                status, text = message("energy", growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt,
+                                       limit=lim)
+                return ImpactResult.failed(scene.name, self.name, status,
+                                           text + _energy_onset(t, d, f, e, self.energy_growth_limit), **common)
         if sim.stop == "through":
             return failed("through", delta=float(np.max(d)), steps=sim.n_steps, dt=dt, limit=lim)
         contacts = contacts_from_series(t, d, f)
@@ -616,6 +618,24 @@ class SteppingAdapter(EngineAdapter):
             self.close(model)
         sim.diagnostics = dict(getattr(model, "diagnostics", {}) or {})     # close() may add to them
         return sim
+
+
+def _energy_onset(t: np.ndarray, delta: np.ndarray, f: np.ndarray, energy: np.ndarray, allowed: float) -> str:
+    """For a failed energy check: "" when the energy first passed the limit during the first contact (or never
+    finitely), else where it did, after that contact had ended: the growth is in the window after it (--tail), so
+    a shorter tail keeps the first contact's row (MuJoCo Warp's float32 chain grows from ~3 ms after touch on the
+    worked beam)."""
+    over = ~(energy / energy[0] - 1.0 <= allowed)           # non-finite counts as over
+    if not over.any():
+        return ""
+    k = int(np.argmax(over))
+    contacts = contacts_from_series(t[:k], delta[:k], f[:k])
+    if not contacts or not math.isfinite(contacts[0].t_end) or contacts[0].t_end >= t[k]:
+        return ""
+    first = contacts[0]
+    return (f"; first past the limit at t = {t[k]:.3g} s, after the first contact ({first.t_start:.3g} .. "
+            f"{first.t_end:.3g} s) had ended: the growth is in the window after it (--tail), a shorter tail keeps "
+            f"the contact's row")
 
 
 def _growth_text(growth: float) -> str:
