@@ -190,7 +190,8 @@ class ChunkedRecord:
 
 def window_end(samples: np.ndarray, settings, scene) -> int | None:
     """Index of the last sample the run keeps (samples: rows of delta [m], force [N]; settings: the
-    job's EngineSettings), or None while the window is open. The base's rule
+    job's EngineSettings), or None while the window is open (the rule's definition; the adapters apply it block by
+    block with `WindowTracker`, which the tests hold to it). The base's rule
     (engines/base.py): the first sample after the first contact with f <= 0 and delta <= 0, plus
     ceil(tail/dt) samples; a blow-up (non-finite, or the ball through the target) ends it at once."""
     delta, f = samples[:, 0], samples[:, 1]

@@ -464,9 +464,9 @@ class EngineAdapter:
                       diagnostics=sim.diagnostics, model=sim.model, dt=dt, dt_limit=plan.dt_limit,
                       model_error=plan.model_error, contact_law=law, validity=(*plan.validity, *sim.validity))
 
-        def failed(reason: str, **kw: Any) -> ImpactResult:
+        def failed(reason: str, more: str = "", **kw: Any) -> ImpactResult:
             status, text = message(reason, **kw)
-            return ImpactResult.failed(scene.name, self.name, status, text, **common)
+            return ImpactResult.failed(scene.name, self.name, status, text + more, **common)
 
         t, d, f = (np.asarray(a, float) for a in (sim.t, sim.delta, sim.f))
         finite = np.isfinite(d) & np.isfinite(f)
@@ -477,10 +477,8 @@ class EngineAdapter:
         if e.size and e[0] > 0:
             growth = float(np.max(e) / e[0] - 1.0)
             if sim.stop == "energy" or growth > self.energy_growth_limit or not np.all(np.isfinite(e)):
-                status, text = message("energy", growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt,
-                                       limit=lim)
-                return ImpactResult.failed(scene.name, self.name, status,
-                                           text + _energy_onset(t, d, f, e, self.energy_growth_limit), **common)
+                return failed("energy", _energy_onset(t, d, f, e, self.energy_growth_limit),
+                              growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt, limit=lim)
         if sim.stop == "through":
             return failed("through", delta=float(np.max(d)), steps=sim.n_steps, dt=dt, limit=lim)
         contacts = contacts_from_series(t, d, f)
