@@ -3,6 +3,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import impactval
@@ -156,3 +158,109 @@ def test_secular_solver_matches_dense_eigh():
 def test_bad_input_is_one_line_error(kw):
     with pytest.raises(ImpactvalError):
         solve_linear(impactval.load_scene("plate_steel"), **kw)
+
+
+def test_series_match_direct_integration_through_a_recontact():
+    """The series (ball, structure at the contact point, approach, energy), sampled from the eigen-coordinates'
+    projections in contact and from the free modes in flight, against DOP853 on the piecewise-linear ODE at the
+    same times, over two re-contacts."""
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    mass, v0 = scene.ball.mass, scene.ball.velocity
+    window = 3e-3
+    r = solve_linear(scene, modes=6, window=window)
+    assert len(r.contacts) >= 3
+    md = structure_modes(scene, 6)
+    k = plate_impact(mass, scene.alpha, v0).k0
+    omega_c = math.sqrt(k / mass)
+    ts, ls = 1.0 / omega_c, v0 / omega_c
+    w, phi, mu = md.omega * ts, md.phi, md.modal_mass / mass
+    n = len(w)
+
+    def rhs(_t, y):
+        d = y[0] - phi @ y[2:2 + n]
+        f = d if d > 0 else 0.0
+        return np.concatenate(([y[1], -f], y[2 + n:], -w**2 * y[2:2 + n] + phi * f / mu))
+
+    def gap(_t, y):
+        return y[0] - phi @ y[2:2 + n]
+    y0 = np.zeros(2 + 2 * n)
+    y0[1] = 1.0
+    sol = solve_ivp(rhs, (0, r.t[-1] / ts), y0, method="DOP853", rtol=1e-12, atol=1e-14, events=gap,
+                    first_step=1e-6, max_step=0.05, dense_output=True)
+    y = sol.sol(r.t / ts)
+    x_ball = y[0] * ls
+    x_structure = (phi @ y[2:2 + n]) * ls
+    scale = np.max(np.abs(x_ball))
+    assert np.max(np.abs(r.x_ball - x_ball)) <= 1e-7 * scale
+    assert np.max(np.abs(r.x_structure - x_structure)) <= 1e-7 * scale
+    assert np.max(np.abs(r.delta - (x_ball - x_structure))) <= 1e-7 * scale
+    assert np.max(np.abs(r.f - k * np.maximum(x_ball - x_structure, 0.0))) <= 1e-7 * k * scale
+    assert np.max(np.abs(r.energy / (0.5 * mass * v0**2) - 1.0)) <= 1e-10
+
+
+def test_series_of_a_residual_model_split_its_approach_like_the_springs():
+    """With the residual flexibility R the contact spring k and R act in series: delta = (x_ball - x_modes)/(1 + k R)
+    and x_structure = x_modes + R f, so x_ball - x_structure = delta in contact and the energy stays put."""
+    scene = impactval.load_scene("beam_cantilever_tip")
+    mass, v0 = scene.ball.mass, scene.ball.velocity
+    k = plate_impact(mass, scene.alpha, v0).k0
+    md = structure_modes(scene, 24, residual=True)
+    assert md.residual_flexibility > 0
+    run = solve_linear_modes(md, mass, k, v0)
+    inside = run.f > 0
+    assert inside.sum() > 100
+    assert np.allclose((run.x_ball - run.x_structure)[inside], run.delta[inside], rtol=0,
+                       atol=1e-12 * run.metrics.delta_m)
+    assert np.max(np.abs(run.energy / (0.5 * mass * v0**2) - 1.0)) <= 1e-10
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 40), count=st.integers(1, 900), t0=st.floats(0.0, 1e-2), h=st.floats(1e-9, 1e-5),
+       cols=st.sampled_from([None, 1, 3]), seed=st.integers(0, 2**32 - 1))
+def test_sines_on_a_grid_equal_the_direct_sum(n, count, t0, h, cols, seed):
+    """`_sines_grid` (a block's offsets table times each block's start phase) against cos/sin summed directly, with
+    blocks forced small so that many of them are stitched together."""
+    from impactval.reference import linear
+
+    rng = np.random.default_rng(seed)
+    p = np.sort(rng.uniform(0.0, 1e7, n))
+    shape = (n,) if cols is None else (n, cols)
+    a, b = rng.normal(size=shape), rng.normal(size=shape)
+    old = linear._BLOCK_ENTRIES
+    linear._BLOCK_ENTRIES = 7 * n + 3           # blocks of 7 samples: the stitching is exercised
+    try:
+        got = linear._sines_grid(p, t0, h, count, a, b)
+    finally:
+        linear._BLOCK_ENTRIES = old
+    tau = t0 + h * np.arange(count)
+    P = np.outer(tau, p)
+    want = np.cos(P) @ a + np.sin(P) @ b
+    # both round the phase p t (up to 1e5 rad here: ~1e-11 rad) alike, not identically
+    size = np.sum(np.abs(a) + np.abs(b), axis=0)
+    assert got.shape == want.shape
+    assert np.all(np.abs(got - want) <= 1e-10 * size)
+
+
+def test_secular_roots_hugging_their_poles():
+    """Couplings from 1e-24 to 1e3 (a mode near a node of the impact point up to a dominant one): every eigenvalue
+    against a bisection of the secular equation in extended precision (its own, 80-bit), within 2 ulp, and the
+    eigenvectors orthonormal."""
+    from impactval.reference.linear import _secular
+
+    rng = np.random.default_rng(7)
+    n1 = 300
+    d = np.concatenate(([0.0], np.sort(rng.uniform(1.0, 1e8, n1 - 1))))
+    beta2 = 10.0 ** rng.uniform(-24, 3, n1)
+    ks = 3.7
+    lam, V, _ = _secular(d, beta2, ks)
+    dl, bl = d.astype(np.longdouble), beta2.astype(np.longdouble)
+    lo = dl.copy()
+    hi = np.append(dl[1:], dl[-1] + ks * np.sum(bl))
+    for _ in range(200):
+        mid = lo + (hi - lo) / 2
+        with np.errstate(divide="ignore"):         # mid on a pole: f = +-inf still says which side
+            f = 1 + ks * np.sum(bl[:, None] / (dl[:, None] - mid[None, :]), axis=0)
+        lo, hi = np.where(f < 0, mid, lo), np.where(f < 0, hi, mid)
+    ref = (lo + (hi - lo) / 2).astype(float)
+    assert np.all(np.abs(lam - ref) <= 2 * np.spacing(np.maximum(ref, 1e-300)))
+    assert np.allclose(V.T @ V, np.eye(n1), atol=1e-10)
