@@ -118,6 +118,41 @@ def test_physics_md_table():
     assert th[0] == pytest.approx(-0.4, abs=1e-6) and mh[0] == pytest.approx(-0.4, abs=1e-6)
 
 
+def test_hertz_weights_of_many_modes_at_once_are_each_modes_own():
+    """A batch (repeats, the free-mass and static ends, cached and new values, more modes than one block) gives
+    every mode the weights its own quadrature gives, in its own place; and the first-order curve of a scene with
+    thousands of modes is the sum of its modes' curves (computed block by block)."""
+    from impactval.reference import perturbation as pt
+
+    rng = np.random.default_rng(3)
+    w = np.concatenate(([0.0, 400.0, 2.0, 2.0], rng.uniform(0.01, 50.0, 700), [60.0, 0.0, 2.0]))
+    rng.shuffle(w)
+    pt._WEIGHTS.clear()
+    hertz_weights(w[:5])                              # some cached before the batch
+    old = pt._D1_BLOCK
+    pt._D1_BLOCK = 100 * 2049                         # blocks of 100 modes
+    try:
+        TH, MH = hertz_weights(w)
+    finally:
+        pt._D1_BLOCK = old
+    for i in rng.choice(len(w), 40, replace=False).tolist() + [int(np.argmax(w == 2.0))]:
+        x = float(w[i])
+        if x == 0.0:
+            assert (TH[i], MH[i]) == (-0.4, -0.4)
+        elif x > pt.W_QUADRATURE_MAX:
+            th_inf, mh_inf = hertz_static_weights()
+            assert (TH[i], MH[i]) == (th_inf / x**2, mh_inf / x**2)
+        else:
+            th, mh = pt._weights_one(x)
+            assert TH[i] == pytest.approx(th, rel=1e-13, abs=1e-16)
+            assert MH[i] == pytest.approx(mh, rel=1e-13, abs=1e-16)
+    s = rng.uniform(0.0, 0.01, len(w))
+    quad = w <= pt.W_QUADRATURE_MAX
+    summed = pt._d1_sum(w[quad], s[quad], 2048)
+    one_by_one = sum(si * hertz_d1(float(wi), 2048)[1] for si, wi in zip(s[quad], w[quad]))
+    assert np.max(np.abs(summed - one_by_one)) <= 1e-13 * np.max(np.abs(one_by_one))
+
+
 def test_static_limit():
     th_inf, mh_inf = hertz_static_weights()
     assert mh_inf == pytest.approx(-5 / 8, abs=1e-10)       # energy with a series spring: exact
