@@ -38,6 +38,8 @@ from impactval.reference.result import Metrics
 SAFETY = 0.25
 #: bound on |w^2 TH(w) - TH_INF| and |w^2 MH(w) - MH_INF| for w >= W_QUADRATURE_MAX (measured <= 0.0034)
 REMAINDER_BOUND = 0.005
+#: the plain-model count extrapolated beyond the table stops here (`ModeChoice.plain_count_capped`: "at least")
+PLAIN_COUNT_CAP = 100_000
 #: the weights table runs up to this scaled frequency (beyond W_QUADRATURE_MAX with the 1/w^2 forms)
 W_TABLE = 64 * W_QUADRATURE_MAX
 
@@ -71,6 +73,11 @@ class ModeChoice:
     TH: np.ndarray
     MH: np.ndarray
     rho_rest: float
+
+    @property
+    def plain_count_capped(self) -> bool:
+        """True when `count_without_residual` stopped at PLAIN_COUNT_CAP: the plain model needs at least that many."""
+        return self.count_without_residual >= PLAIN_COUNT_CAP
 
     @property
     def d_t(self) -> np.ndarray:
@@ -199,4 +206,4 @@ def _extrapolate_plain(scene, n_all: int, tail_at_n_all: float, budget: float) -
     plate like n^-1 (modes fill the (m, n) plane: N ~ r^2, dropped sum ~ 1/r^2)."""
     power = 1.0 if scene.target.kind == "plate" else 3.0
     n = int(math.ceil(n_all * (tail_at_n_all / budget) ** (1.0 / power)))
-    return min(max(n, n_all), 100000)
+    return min(max(n, n_all), PLAIN_COUNT_CAP)

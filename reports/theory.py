@@ -159,7 +159,8 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
                   f"over the modes used: {cmp.s_total:.4g} (modes far above the impact frequency count with "
                   "s_j/w_j^2 only).",
                   f"For a relative tolerance of {c.tol:g}: keep **{c.count}** modes with the residual static "
-                  f"flexibility of the rest ({c.count_without_residual} without it; highest kept frequency "
+                  f"flexibility of the rest ({'at least ' if c.plain_count_capped else ''}{c.count_without_residual} "
+                  f"without it; highest kept frequency "
                   f"{c.omega_max / (2 * math.pi):.5g} Hz). A rigid plate is "
                   f"{'enough' if c.rigid_plate_enough else 'not enough'}.", "",
                   "| mode | omega [rad/s] | w | s | TH | MH | s*TH (t_m) | 1.5 s*MH (f_m) |", "|---:|---:|---:|---:|---:|---:|---:|---:|"]

@@ -102,3 +102,34 @@ def test_explain_gives_the_beam_theory_gap_and_recommends_timoshenko_above_one_p
         printed = [float(x) for x in re.findall(r"([+-]\d+\.\d+) %", line)[:3]]
         assert printed == pytest.approx(gap(name), abs=0.006), line
         assert ('set theory = "timoshenko"' in line) == recommend, line
+
+
+PLATE_THOUSANDS_OF_MODES = """description = "a light ball on a PMMA plate (fuzz seed 2520): a plain model would need > 1e5 modes"
+[ball]
+radius = 0.024146
+velocity = 0.1154
+material = "titanium"
+[target]
+kind = "plate"
+material = "pmma"
+support = "simply-supported"
+length = 0.46781
+width = 0.14344
+thickness = 0.0047578
+impact_at = [0.687, 0.727]
+"""
+
+
+def test_a_capped_plain_mode_count_reads_at_least(tmp_path):
+    """The plain-model count extrapolated past its cap is a lower bound, and said so (it read "100000 without it")."""
+    from impactval.reference.modechoice import PLAIN_COUNT_CAP, required_modes
+
+    path = tmp_path / "plate_many_modes.toml"
+    path.write_text(PLATE_THOUSANDS_OF_MODES)
+    choice = required_modes(impactval.load_scene(str(path)), 1e-3)
+    assert choice.plain_count_capped and choice.count_without_residual == PLAIN_COUNT_CAP
+    assert choice.count < PLAIN_COUNT_CAP
+    out = cli("reference", str(path), "--explain", "--tol", "1e-3")
+    assert out.returncode == 0, out.stderr
+    assert f"at least {PLAIN_COUNT_CAP} without it" in out.stdout
+    assert f"{choice.count} with the residual" in out.stdout
