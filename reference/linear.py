@@ -292,14 +292,34 @@ def _first_root(fun, h: float, tau_max: float, start: float = 0.0, sign: int = -
         bad = np.flatnonzero(v * sign > 0) if sign < 0 else np.flatnonzero(v > 0)
         if len(bad):
             i = int(bad[0])
-            a = grid[i - 1] if i > 0 else lo
             taus.append(grid[:i]); vals.append(v[:i])
-            root = optimize.brentq(lambda x: float(fun(x)[0]), a, grid[i], xtol=1e-15 * grid[i], rtol=1e-15,
-                                   maxiter=200)
+            a, b = _bracket(fun, grid[i - 1] if i > 0 else lo, grid[i], h, sign)
+            root = optimize.brentq(lambda x: float(fun(x)[0]), a, b, xtol=1e-15 * b, rtol=1e-15, maxiter=200)
             return root, np.concatenate(taus), np.concatenate(vals)
         taus.append(grid); vals.append(v)
         lo = grid[-1]
     return None, np.concatenate(taus), np.concatenate(vals)
+
+
+def _bracket(fun, a: float, b: float, h: float, sign: int, tries: int = 4) -> tuple[float, float]:
+    """A bracket of fun's sign change (to negative for sign=-1, to positive for sign=+1) near the grid's [a, b],
+    checked with fun itself: the grid's sum (`_sines_grid`) and the direct one round differently, so a crossing
+    within roundoff of a grid point (a rigid plate's contact ends exactly on one: its grid is t_est/4000) may show in
+    one and not the other; the bracket then moves by a grid step (at most `tries` times) until fun agrees."""
+    def after(x: float) -> bool:
+        return x < 0.0 if sign < 0 else x > 0.0
+
+    fa, fb = float(fun(a)[0]), float(fun(b)[0])
+    for _ in range(tries):
+        if fa * fb <= 0.0:
+            break
+        if after(fa):               # fun crossed before a: step back
+            a, b, fb = a - h, a, fa
+            fa = float(fun(a)[0])
+        else:                       # fun crosses after b: step on
+            a, b, fa = b, b + h, fb
+            fb = float(fun(b)[0])
+    return a, b
 
 
 def _contact_phase(sysm: LinearSystem, ph: _Phase, h: float, tau_max: float):

@@ -264,3 +264,16 @@ def test_secular_roots_hugging_their_poles():
     ref = (lo + (hi - lo) / 2).astype(float)
     assert np.all(np.abs(lam - ref) <= 2 * np.spacing(np.maximum(ref, 1e-300)))
     assert np.allclose(V.T @ V, np.eye(n1), atol=1e-10)
+
+
+def test_contact_ending_on_a_grid_point_is_found():
+    """A rigid plate's linear contact lasts pi sqrt(m/k), exactly the root-finding grid's 4000th point: the grid's sum
+    and the direct one round differently there, and the bracket must still hold the root (13 % of random balls raised
+    "f(a) and f(b) must have different signs" before the bracket was checked with the direct sum)."""
+    md = structure_modes(impactval.load_scene("plate_steel"))
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        m, k, v = 10 ** rng.uniform(-4, 1), 10 ** rng.uniform(3, 9), 10 ** rng.uniform(-2, 1)
+        run = solve_linear_modes(md, m, k, v)
+        assert run.metrics.t_m == pytest.approx(math.pi * math.sqrt(m / k), rel=1e-12)
+        assert run.metrics.delta_m == pytest.approx(v * math.sqrt(m / k), rel=1e-12)
