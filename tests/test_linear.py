@@ -86,19 +86,10 @@ def test_custom_stiffness_and_energy():
     assert r.delta_m == pytest.approx(d_max, rel=1e-8)
 
 
-def test_recontacts_match_direct_integration():
-    """After separation the ball and structure move freely; a re-contact starts at the next upward zero
-    of the gap. Contact start/end times against DOP853 on the piecewise-linear ODE with gap events."""
-    scene = impactval.load_scene("heavy_ball_slender_beam")
-    mass, v0 = scene.ball.mass, scene.ball.velocity
-    window = 3e-3
-    r = solve_linear(scene, modes=6, window=window)
-    assert len(r.contacts) >= 2
-    assert r.energy_error <= 1e-9
-    md = structure_modes(scene, 6)
-    k = plate_impact(mass, scene.alpha, v0).k0
-    omega_c = math.sqrt(k / mass)
-    ts = 1.0 / omega_c
+def _direct_piecewise(md, mass: float, k: float, t_stop: float):
+    """DOP853 (rtol 1e-12) on the piecewise-linear ODE in units of 1/omega_c and v0/omega_c (contact spring k only
+    while the gap is closed), gap zeros as events, dense output; returns (solution, phi of the modes)."""
+    ts = math.sqrt(mass / k)
     w, phi, mu = md.omega * ts, md.phi, md.modal_mass / mass
     n = len(w)
 
@@ -111,9 +102,24 @@ def test_recontacts_match_direct_integration():
         return y[0] - phi @ y[2:2 + n]
     y0 = np.zeros(2 + 2 * n)
     y0[1] = 1.0
-    t_stop = (r.contacts[0].t_end + window) / ts
     sol = solve_ivp(rhs, (0, t_stop), y0, method="DOP853", rtol=1e-12, atol=1e-14, events=gap, first_step=1e-6,
-                    max_step=0.05)
+                    max_step=0.05, dense_output=True)
+    return sol, phi
+
+
+def test_recontacts_match_direct_integration():
+    """After separation the ball and structure move freely; a re-contact starts at the next upward zero
+    of the gap. Contact start/end times against DOP853 on the piecewise-linear ODE with gap events."""
+    scene = impactval.load_scene("heavy_ball_slender_beam")
+    mass, v0 = scene.ball.mass, scene.ball.velocity
+    window = 3e-3
+    r = solve_linear(scene, modes=6, window=window)
+    assert len(r.contacts) >= 2
+    assert r.energy_error <= 1e-9
+    k = plate_impact(mass, scene.alpha, v0).k0
+    ts = math.sqrt(mass / k)
+    t_stop = (r.contacts[0].t_end + window) / ts
+    sol, _ = _direct_piecewise(structure_modes(scene, 6), mass, k, t_stop)
     crossings = np.sort(sol.t_events[0]) * ts
     mine = sorted([c.t_start for c in r.contacts[1:]] + [c.t_end for c in r.contacts if math.isfinite(c.t_end)])
     mine = [x for x in mine if x <= t_stop * ts * (1 - 1e-9)]
@@ -169,24 +175,10 @@ def test_series_match_direct_integration_through_a_recontact():
     window = 3e-3
     r = solve_linear(scene, modes=6, window=window)
     assert len(r.contacts) >= 3
-    md = structure_modes(scene, 6)
     k = plate_impact(mass, scene.alpha, v0).k0
-    omega_c = math.sqrt(k / mass)
-    ts, ls = 1.0 / omega_c, v0 / omega_c
-    w, phi, mu = md.omega * ts, md.phi, md.modal_mass / mass
-    n = len(w)
-
-    def rhs(_t, y):
-        d = y[0] - phi @ y[2:2 + n]
-        f = d if d > 0 else 0.0
-        return np.concatenate(([y[1], -f], y[2 + n:], -w**2 * y[2:2 + n] + phi * f / mu))
-
-    def gap(_t, y):
-        return y[0] - phi @ y[2:2 + n]
-    y0 = np.zeros(2 + 2 * n)
-    y0[1] = 1.0
-    sol = solve_ivp(rhs, (0, r.t[-1] / ts), y0, method="DOP853", rtol=1e-12, atol=1e-14, events=gap,
-                    first_step=1e-6, max_step=0.05, dense_output=True)
+    ts, ls = math.sqrt(mass / k), v0 * math.sqrt(mass / k)
+    sol, phi = _direct_piecewise(structure_modes(scene, 6), mass, k, r.t[-1] / ts)
+    n = len(phi)
     y = sol.sol(r.t / ts)
     x_ball = y[0] * ls
     x_structure = (phi @ y[2:2 + n]) * ls
