@@ -239,7 +239,7 @@ def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: b
             r = solve_linear(sc, tol=tol, window=window)
             m, u, n, label = r.metrics, r.uncertainty, r.modes, r.model
             series = (r.t, r.delta, r.f)
-            validity = ()
+            validity = r.validity
         else:
             p = perturbation(sc, "hertz")
             m, u, n, label, validity = p.metrics, None, len(p.weights.s), "hertz-first-order", p.validity

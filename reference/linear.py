@@ -39,6 +39,9 @@ from impactval.reference.result import Contact, ImpactResult, Metrics
 
 #: grid points per estimated contact time used to bracket roots (and to sample the series)
 GRID_PER_CONTACT = 4000
+#: the automatic mode count doubles until the n- and 2n-mode models agree within tol or 2n reaches this (n is kept;
+#: a 7,424-mode plate takes ~16 s and ~1 GB): beyond it the result says its uncertainty is above tol
+LINEAR_MODE_CAP = 4096
 #: give up looking for the end of a contact after this many estimated contact times
 MAX_CONTACT_TIMES = 200.0
 
@@ -260,7 +263,8 @@ def _track(sysm: LinearSystem, ph: _Phase, end: float, m: int, extra: float):
     order, and there the ball displacement x1 [m], the modes' displacement at the contact point x2 = sum phi_i q_i
     [m] and the ball velocity u [m/s]: the eigen-coordinates a = c cos(p tau) + s sin(p tau) projected on the rows
     of U that give x1 and x2 (`sysm.x1_row`, `sysm.x2_row`), O(modes) a sample instead of the whole state
-    (O(modes^2): 11,000 samples of a 4,097-mode plate took 38 s and 2 GB a copy)."""
+    (O(modes^2): a plate's series, 11,000 samples a contact, took 38 s of its solve over mode counts up to 7,425
+    and 2 GB an array)."""
     r1, r2 = sysm.x1_row, sysm.x2_row
     pc, ps = sysm.p * ph.c, sysm.p * ph.s
     a = np.column_stack((r1 * ph.c, r2 * ph.c, r1 * ps))
@@ -274,7 +278,8 @@ def _track(sysm: LinearSystem, ph: _Phase, end: float, m: int, extra: float):
     return tau, vals[:, 0], vals[:, 1], vals[:, 2]
 
 
-#: most entries (samples x modes) of one block of cos/sin tables (8 bytes each: 2e6 ~ 16 MB a table)
+#: most entries (samples x modes) of one block of cos/sin tables or of `_sines_grid`'s complex offsets (8 and 16 bytes
+#: each: 2e6 ~ 16-32 MB a table)
 _BLOCK_ENTRIES = 2e6
 
 
@@ -494,7 +499,7 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
                 # the 192-mode error is 1.2x the 192-vs-384 difference)
                 trunc = Metrics(2 * abs(a.t_m - b.t_m), 2 * abs(a.f_m - b.f_m), 2 * abs(a.delta_m - b.delta_m))
                 rel = max(trunc.t_m / a.t_m, trunc.f_m / a.f_m, trunc.delta_m / a.delta_m)
-                if rel <= tol or n >= 4096:
+                if rel <= tol or n >= LINEAR_MODE_CAP:
                     run, n = prev
                     break
             prev = (run, n)
@@ -512,6 +517,12 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
         m = Metrics(math.pi / omega0, k * v0 / omega0, v0 / omega0)
     ru = run.root_uncertainty
     unc = Metrics(trunc.t_m + ru, trunc.f_m + 1e-14 * m.f_m, trunc.delta_m + 1e-14 * m.delta_m)
+    rel = max(unc.t_m / m.t_m, unc.f_m / m.f_m, unc.delta_m / m.delta_m)
+    validity = ()
+    if rel > tol * (1 + 1e-9):          # the doubling stopped at its cap (plates converge like 1/n)
+        validity = (f"uncertainty {rel:.2g} (relative) is above tol {tol:g}: the automatic mode count stopped at "
+                    f"{n_modes} modes (the doubling's cap {LINEAR_MODE_CAP}: the cost grows like modes^2); give a "
+                    f"looser tol",)
     return ImpactResult(
         scene=scene.name, source="reference", model=model, t_m=m.t_m, f_m=m.f_m, delta_m=m.delta_m,
         uncertainty=unc, modes=n_modes, t=run.t, f=run.f, delta=run.delta, x_ball=run.x_ball,
@@ -519,5 +530,5 @@ def solve_linear(scene, tol: float = 1e-6, modes: int | None = None, stiffness: 
         energy_error=float(np.max(np.abs(run.energy / run.energy[0] - 1.0))),
         contacts=run.contacts if target.kind != "rigid-plate" else (Contact(0.0, m.t_m, m.f_m, m.delta_m),),
         settings={"tol": tol, "window": window, "k": k, "model": "linear"}, n_steps=len(run.t) - 1,
-        wall_time_step_s=time.perf_counter() - t0,
+        wall_time_step_s=time.perf_counter() - t0, validity=validity,
     )

@@ -167,8 +167,9 @@ def hertz_d1(w: float, n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
 
 def _d1_rows(w: np.ndarray, z: ZeroOrder) -> np.ndarray:
     """`hertz_d1` of finite modes `w` [k] on one zero-order grid, a row each [k, n + 1]: the same quadratures along
-    the rows of one array (one cumulative Simpson call per integral for all of them, not per mode: the weights of
-    thousands of modes were ~1 ms each, ~10 s on a plate, nearly all of it per-call overhead)."""
+    the rows of one array (one cumulative Simpson call per integral for a block of modes, not per mode; with the
+    equal-interval rule of `_cumint` the weights and curves of an unseen beam needing 1,109 modes took 3.3 s instead
+    of 8.3 s)."""
     wt = np.outer(w, z.t)
     cw, sw = np.cos(wt), np.sin(wt)
     C = _cumint(z.gp * cw * z.dt_dphi, z.phi)

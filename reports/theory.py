@@ -31,7 +31,8 @@ MODELS = (
 class TheoryComparison:
     """All models of one scene: `table` (DataFrame, one row per model, SI units and relative differences
     to the nonlinear reference), the linear contact's `model_form_error` (relative, linear - Hertz), the
-    first-order `s_total` (sum of s_j), the mode choice, and the force curves per model (t [s], f [N])."""
+    first-order `s_total` (sum of s_j), the mode choice, the force curves per model (t [s], f [N]) and the exact
+    solutions' own warnings (`warnings`: (model, text) pairs: Hertz assumptions, an uncertainty above tol, ...)."""
 
     scene: str
     table: object
@@ -41,6 +42,7 @@ class TheoryComparison:
     curves: dict
     k0: float
     tol: float
+    warnings: tuple = ()
 
 
 def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> TheoryComparison:
@@ -85,8 +87,9 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
         rows.append({"model": key, "description": labels[key], "t_m_s": m.t_m, "f_m_N": m.f_m,
                      "delta_m_m": m.delta_m, "rel_t_m": d.t_m, "rel_f_m": d.f_m, "rel_delta_m": d.delta_m})
     table = pd.DataFrame(rows)
+    warnings = tuple(("nonlinear", w) for w in ref.validity) + tuple(("linear", w) for w in lin.validity)
     return TheoryComparison(scene.name, table, lin.metrics.relative_to(ref.metrics), s_total,
-                            required_modes(scene, choice_tol), curves, plate.k0, tol)
+                            required_modes(scene, choice_tol), curves, plate.k0, tol, warnings)
 
 
 def _pct(x: float) -> str:
@@ -142,6 +145,8 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
         lines.append(f"| {r['description']} | {_num(r['t_m_s'], 1e6)} | {_num(r['f_m_N'])} | {_num(r['delta_m_m'], 1e6)} | "
                      f"{_pct(r['rel_t_m'])} | {_pct(r['rel_f_m'])} | {_pct(r['rel_delta_m'])} |")
     lines.append("")
+    if cmp.warnings:
+        lines += ["Warnings of the exact solutions:", ""] + [f"- {model}: {text}" for model, text in cmp.warnings] + [""]
     if plot_name:
         lines += [f"![contact force by model]({plot_name})", "",
                   "The perturbation curves are d0 + d1 over the zero-order contact; their peaks differ from the "

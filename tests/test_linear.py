@@ -269,3 +269,37 @@ def test_contact_ending_on_a_grid_point_is_found():
         run = solve_linear_modes(md, m, k, v)
         assert run.metrics.t_m == pytest.approx(math.pi * math.sqrt(m / k), rel=1e-12)
         assert run.metrics.delta_m == pytest.approx(v * math.sqrt(m / k), rel=1e-12)
+
+
+def test_mode_count_at_its_cap_says_the_uncertainty_is_above_tol(monkeypatch):
+    """The automatic count's doubling stops at LINEAR_MODE_CAP; a result whose uncertainty is then above tol says so in
+    its validity and on the terminal (a plate at tol 1e-6 stopped at 3,712 modes with 4.1e-6, without a word)."""
+    from click.testing import CliRunner
+
+    from impactval.cli import main
+    from impactval.reference import linear
+
+    scene = impactval.load_scene("beam_ss_midspan")
+    free = solve_linear(scene, tol=1e-9)
+    assert free.validity == () and max(free.uncertainty.f_m / free.f_m, free.uncertainty.t_m / free.t_m) <= 1e-9
+    monkeypatch.setattr(linear, "LINEAR_MODE_CAP", 64)
+    capped = solve_linear(scene, tol=1e-9)
+    rel = max(capped.uncertainty.t_m / capped.t_m, capped.uncertainty.f_m / capped.f_m,
+              capped.uncertainty.delta_m / capped.delta_m)
+    assert capped.modes < 64 < free.modes and rel > 1e-9
+    assert len(capped.validity) == 1 and "above tol 1e-09" in capped.validity[0]
+    out = CliRunner().invoke(main, ["reference", "beam_ss_midspan", "--model", "linear", "--tol", "1e-9"])
+    assert out.exit_code == 0, out.output
+    assert "! uncertainty" in out.output and "above tol 1e-09" in out.output
+
+
+def test_theory_page_shows_the_exact_solutions_warnings(monkeypatch, tmp_path):
+    """The linear solution's uncertainty above tol (and the Hertz reference's own warnings) reach the theory page."""
+    from impactval.reference import linear
+    from impactval.reports.theory import theory_page
+
+    monkeypatch.setattr(linear, "LINEAR_MODE_CAP", 64)
+    path, cmp = theory_page(impactval.load_scene("beam_ss_midspan"), tmp_path, tol=1e-9, plot=False)
+    assert any(model == "linear" and "above tol 1e-09" in text for model, text in cmp.warnings)
+    text = path.read_text()
+    assert "Warnings of the exact solutions:" in text and "- linear: uncertainty" in text
