@@ -177,7 +177,8 @@ def _explain(sc, tol: float) -> None:
 
     for warning in perturbation_validity(e.t_m, e.delta_m)[0]:
         click.echo(f"  ! structure effect and mode weights are first-order: {warning.split(': ', 1)[1]}")
-    click.echo(f"  modes needed (first-order weights, a-priori, safety factor {1 / SAFETY:g}): {c.count} with the residual "
+    click.echo(f"  modes needed (first-order weights, a-priori, safety factor {1 / SAFETY:g}): "
+               f"{'at least ' if c.count_capped else ''}{c.count} with the residual "
                f"static flexibility, {'at least ' if c.plain_count_capped else ''}{c.count_without_residual} "
                f"without it")
     if sc.target.kind in ("beam", "plate") and getattr(sc.target, "modes", None) is None:

@@ -73,6 +73,8 @@ class ModeChoice:
     TH: np.ndarray
     MH: np.ndarray
     rho_rest: float
+    #: `count` stopped at the table's size (`required_modes`' max_modes): the scene needs at least that many
+    count_capped: bool = False
 
     @property
     def plain_count_capped(self) -> bool:
@@ -177,7 +179,8 @@ def required_modes(scene, tol: float = 1e-3, max_modes: int = 8192) -> ModeChoic
     count_plain = _first_below(plain, budget, n_all)
     if count_plain is None:      # the table's modes are not enough without a residual: extrapolate the 1/n^3 tail
         count_plain = _extrapolate_plain(scene, n_all, plain[-1], budget)
-    if count is None:
+    capped = count is None
+    if capped:
         count = n_all
     om_all = md.omega
 
@@ -193,7 +196,7 @@ def required_modes(scene, tol: float = 1e-3, max_modes: int = 8192) -> ModeChoic
         return float(structure_modes(scene, n).omega[-1])
 
     return ModeChoice(scene.name, float(tol), int(count), int(count_plain), omax(count), omax(count_plain), rigid,
-                      effect, md.omega, w, s, mw.TH, mw.MH, rho_rest)
+                      effect, md.omega, w, s, mw.TH, mw.MH, rho_rest, capped)
 
 
 def _first_below(tails: np.ndarray, budget: float, n_all: int) -> int | None:

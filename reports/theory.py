@@ -163,7 +163,8 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
                   f"delta_m {_pct(se.delta_m)} ({valid}). Sum of the small parameters s_j = (m0/m_j) phi_j0^2 "
                   f"over the modes used: {cmp.s_total:.4g} (modes far above the impact frequency count with "
                   "s_j/w_j^2 only).",
-                  f"For a relative tolerance of {c.tol:g}: keep **{c.count}** modes with the residual static "
+                  f"For a relative tolerance of {c.tol:g}: keep **{'at least ' if c.count_capped else ''}{c.count}** "
+                  f"modes with the residual static "
                   f"flexibility of the rest ({'at least ' if c.plain_count_capped else ''}{c.count_without_residual} "
                   f"without it; highest kept frequency "
                   f"{c.omega_max / (2 * math.pi):.5g} Hz). A rigid plate is "

@@ -110,14 +110,18 @@ PLATE_THOUSANDS_OF_MODES = Path(__file__).parent / "data" / "plate_thousands_of_
 
 
 def test_a_capped_plain_mode_count_reads_at_least():
-    """The plain-model count extrapolated past its cap is a lower bound, and said so (it read "100000 without it")."""
+    """Counts that stopped at a cap are lower bounds, and said so (they read "8192 with the residual", "100000 without
+    it")."""
     from impactval.reference.modechoice import PLAIN_COUNT_CAP, required_modes
 
     path = PLATE_THOUSANDS_OF_MODES
     choice = required_modes(impactval.load_scene(str(path)), 1e-3)
     assert choice.plain_count_capped and choice.count_without_residual == PLAIN_COUNT_CAP
-    assert choice.count < PLAIN_COUNT_CAP
+    # the count with the residual stopped at the weights table's size (8192) too: a lower bound as well
+    assert choice.count_capped and choice.count == len(choice.omega) < PLAIN_COUNT_CAP
     out = cli("reference", str(path), "--explain", "--tol", "1e-3")
     assert out.returncode == 0, out.stderr
     assert f"at least {PLAIN_COUNT_CAP} without it" in out.stdout
-    assert f"{choice.count} with the residual" in out.stdout
+    assert f"at least {choice.count} with the residual" in out.stdout
+    beam = required_modes(impactval.load_scene("beam_ss_midspan"), 1e-3)
+    assert not beam.count_capped and not beam.plain_count_capped
