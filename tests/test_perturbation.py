@@ -209,3 +209,20 @@ def test_curves():
     # d1 curve at the peak equals MH
     t, d1 = hertz_d1(2.0)
     assert d1[(len(t) - 1) // 2] == pytest.approx(hertz_weights([2.0])[1][0], abs=1e-12)
+
+
+def test_automatic_mode_set_at_its_cap_says_so(monkeypatch):
+    """The automatic first-order mode set takes every mode up to w = W_QUADRATURE_MAX; stopped by its cap below that,
+    the modes above are static springs only, and the result says so (fz2513's t_m shift was 33 % low at 4,096 modes,
+    without a word)."""
+    from impactval.reference import perturbation as pt
+
+    scene = impactval.load_scene("beam_ss_midspan")
+    full = perturbation(scene)
+    assert full.weights.w[-1] < pt.W_QUADRATURE_MAX < 2 * full.weights.w[-1]
+    assert not any("stopped at its cap" in v for v in full.validity)
+    monkeypatch.setattr(pt, "PERTURBATION_MODE_CAP", 16)
+    capped = perturbation(scene)
+    assert len(capped.weights.w) == 16 and capped.weights.w[-1] < pt.W_QUADRATURE_MAX
+    assert any("stopped at its cap (16 modes" in v for v in capped.validity)
+    assert capped.shift_t != full.shift_t
