@@ -283,9 +283,9 @@ def _track(sysm: LinearSystem, ph: _Phase, end: float, m: int, extra: float):
 _BLOCK_ENTRIES = 2e6
 
 
-def _first_root(fun, h: float, tau_max: float, start: float = 0.0, sign: int = -1, grid_fun=None):
-    """First tau in (start, tau_max] where fun changes sign (from + to - for sign=-1), by grid + brentq;
-    `grid_fun(t0, h, count)` (optional) gives fun on a uniform grid faster (`_sines_grid`).
+def _first_root(fun, grid_fun, h: float, tau_max: float, start: float = 0.0, sign: int = -1):
+    """First tau in (start, tau_max] where fun changes sign (from + to - for sign=-1): `grid_fun(t0, h, count)`, fun
+    on the uniform grid t0 + j h (`_sines_grid`), finds the first sign change, brentq on fun itself the root.
 
     Returns (tau_root or None, grid taus, grid values up to the root)."""
     taus, vals = [], []
@@ -293,7 +293,7 @@ def _first_root(fun, h: float, tau_max: float, start: float = 0.0, sign: int = -
     chunk = 4000
     while lo < tau_max:
         grid = lo + h * np.arange(1, chunk + 1)
-        v = fun(grid) if grid_fun is None else grid_fun(lo + h, h, chunk)
+        v = grid_fun(lo + h, h, chunk)
         bad = np.flatnonzero(v * sign > 0) if sign < 0 else np.flatnonzero(v > 0)
         if len(bad):
             i = int(bad[0])
@@ -329,8 +329,8 @@ def _bracket(fun, a: float, b: float, h: float, sign: int, tries: int = 4) -> tu
 
 def _contact_phase(sysm: LinearSystem, ph: _Phase, h: float, tau_max: float):
     """End time (tau) of a contact phase, peak (tau, delta), and its grid."""
-    end, taus, vals = _first_root(lambda x: ph.delta(sysm.p, x), h, tau_max,
-                                  grid_fun=lambda t0, hh, k: _sines_grid(sysm.p, t0, hh, k, ph.A, ph.B))
+    end, taus, vals = _first_root(lambda x: ph.delta(sysm.p, x),
+                                  lambda t0, hh, k: _sines_grid(sysm.p, t0, hh, k, ph.A, ph.B), h, tau_max)
     if end is None:
         raise ImpactvalError(f"linear theory: the contact did not end within {tau_max:.3g} s.")
     taus = np.concatenate(([0.0], taus, [end]))
@@ -414,7 +414,7 @@ def solve_linear_modes(modes: Modes, mass: float, k: float, v0: float, window: f
         def gap_grid(t0, hh, k, x10=x10, u=u, cq=cq, sq=sq):
             return x10 + u * (t0 + hh * np.arange(k)) - _sines_grid(w, t0, hh, k, cq, sq)
 
-        start, _, _ = _first_root(gap, h, t_stop - t_now, start=0.0, sign=+1, grid_fun=gap_grid)
+        start, _, _ = _first_root(gap, gap_grid, h, t_stop - t_now, start=0.0, sign=+1)
         span = (start if start is not None else t_stop - t_now)
         m = max(int(n_series * span / t_est), 50)
         x = np.linspace(0.0, span, m + 1)[1:]

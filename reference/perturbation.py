@@ -199,10 +199,16 @@ def _d1_sum(w: np.ndarray, s: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def _weights_of(d1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(TH, MH) from d1 curves on the zero-order grid (rows or one curve): TH = d1(2c)/(2c), MH = d1(c) (phi = pi/2,
+    the grid's middle)."""
+    mid = (d1.shape[-1] - 1) // 2
+    return d1[..., -1] / (2.0 * C_HERTZ), d1[..., mid]
+
+
 def _weights_one(w: float, n: int | None = None) -> tuple[float, float]:
-    t, d1 = hertz_d1(w, n)
-    mid = (len(t) - 1) // 2                   # phi = pi/2 <=> t = c
-    return float(d1[-1] / (2.0 * C_HERTZ)), float(d1[mid])
+    th, mh = _weights_of(hertz_d1(w, n)[1])
+    return float(th), float(mh)
 
 
 @lru_cache(maxsize=1)
@@ -255,12 +261,10 @@ def _weights_together(w: np.ndarray) -> dict[float, tuple[float, float]]:
         by_size.setdefault(_grid_size(x), []).append(x)
     for n, ws in by_size.items():
         z = zero_order(n)
-        mid = n // 2                          # phi = pi/2 <=> t = c
         block = max(1, _D1_BLOCK // (n + 1))
         for i0 in range(0, len(ws), block):
             part = ws[i0:i0 + block]
-            d1 = _d1_rows(np.array(part), z)
-            for x, th, mh in zip(part, d1[:, -1] / (2.0 * C_HERTZ), d1[:, mid]):
+            for x, th, mh in zip(part, *_weights_of(_d1_rows(np.array(part), z))):
                 fresh[x] = (float(th), float(mh))
                 _keep(x, fresh[x])
     return fresh

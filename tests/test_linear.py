@@ -183,11 +183,13 @@ def test_series_match_direct_integration_through_a_recontact():
     x_ball = y[0] * ls
     x_structure = (phi @ y[2:2 + n]) * ls
     scale = np.max(np.abs(x_ball))
-    assert np.max(np.abs(r.x_ball - x_ball)) <= 1e-7 * scale
-    assert np.max(np.abs(r.x_structure - x_structure)) <= 1e-7 * scale
-    assert np.max(np.abs(r.delta - (x_ball - x_structure))) <= 1e-7 * scale
-    assert np.max(np.abs(r.f - k * np.maximum(x_ball - x_structure, 0.0))) <= 1e-7 * k * scale
-    assert np.max(np.abs(r.energy / (0.5 * mass * v0**2) - 1.0)) <= 1e-10
+    # measured: ball 6.5e-13, structure 3.0e-12 of the travel (DOP853's own error across the contact's kinks), energy
+    # 4.4e-16
+    assert np.max(np.abs(r.x_ball - x_ball)) <= 1e-10 * scale
+    assert np.max(np.abs(r.x_structure - x_structure)) <= 1e-10 * scale
+    assert np.max(np.abs(r.delta - (x_ball - x_structure))) <= 1e-10 * scale
+    assert np.max(np.abs(r.f - k * np.maximum(x_ball - x_structure, 0.0))) <= 1e-10 * k * scale
+    assert np.max(np.abs(r.energy / (0.5 * mass * v0**2) - 1.0)) <= 1e-13
 
 
 def test_series_of_a_residual_model_split_its_approach_like_the_springs():
