@@ -98,3 +98,23 @@ def check_engine_steps(scenes, dts, tail: float) -> None:
                     f"--dt {dt:g} s with --tail {tail:g} s needs at least {steps:.3g} engine steps per job on scene "
                     f"{sc.name!r} (contact ~{t_plate:.3g} s); the limit is {MAX_ENGINE_STEPS:.0e}: use a larger --dt "
                     f"(e.g. {t_plate / 1000:.1g} s) or a shorter --tail.")
+
+
+def load_scenes(names) -> list:
+    """Every scene of `names` (catalogue names or TOML paths) loaded, or one ImpactvalError that lists every refused
+    scene at once, one `impactval: error:` line each (the CLI prints the first prefix), so that a batch with several
+    bad files is fixed in one round instead of one rerun per file; nothing is run when any is refused."""
+    import impactval
+
+    scenes, refused = [], []
+    for name in names:
+        try:
+            scenes.append(impactval.load_scene(name))
+        except ImpactvalError as err:
+            refused.append(str(err))
+    if len(refused) == 1:
+        raise ImpactvalError(refused[0])
+    if refused:
+        raise ImpactvalError("\nimpactval: error: ".join(refused + [
+            f"{len(refused)} of {len(names)} scenes refused (above); nothing was run: fix or leave out those files"]))
+    return scenes

@@ -14,7 +14,7 @@ import click
 
 from impactval.errors import ImpactvalError
 from impactval.checks import (MAX_ENGINE_MODES, MAX_SEGMENTS, check_answer, check_engine_steps, check_run_number,
-                              check_tol)
+                              check_tol, load_scenes)
 from impactval.checks import check_window as check_window_arg
 from impactval.paths import check_output_dir, check_output_file, write_guard
 
@@ -115,7 +115,7 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
         check_output_file(curve, "--curve")
     check_tol(tol)
     check_window_arg(window)
-    scenes_ = [impactval.load_scene(n) for n in names]
+    scenes_ = load_scenes(names)
     if model != "nonlinear":
         return _reference_theory(scenes_, model, tol, window, as_json, curve, explain)
     if window:
@@ -284,7 +284,7 @@ def theory(scene: tuple[str, ...], out_dir: str, tol: float, no_plot: bool) -> N
     names = list(scene) or catalogue_names()
     check_output_dir(out_dir, "--out")
     check_tol(tol)
-    scenes_ = [impactval.load_scene(n) for n in names]
+    scenes_ = load_scenes(names)
     plot = not no_plot
     if plot:
         import importlib.util
@@ -417,7 +417,7 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     import impactval
     from impactval.scenarios.scene import load_catalogue
 
-    check_engine_steps([impactval.load_scene(n) for n in names] + (load_catalogue(tag) if tag else []), dts,
+    check_engine_steps(load_scenes(names) + (load_catalogue(tag) if tag else []), dts,
                        float(tail))
     _warn_if_compiling()
     import shlex

@@ -90,7 +90,9 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
         base = EngineSettings(contact=contact, timeout_s=timeout, options=_parse_options(options))
     except EngineError as err:
         raise ImpactvalError(str(err)) from None
-    scenes = [impactval.load_scene(s) for s in scene]
+    from impactval.checks import load_scenes
+
+    scenes = load_scenes(scene)
     cells = sw.build_jobs(scenes, specs, base, tol=tol, **axes)
     for spec in specs:           # a misspelt integrator fails here, before any job
         for job in [j for j in cells if j.spec == spec][:1]:

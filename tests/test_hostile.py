@@ -344,3 +344,37 @@ def test_path_checks_leave_nothing_behind(tmp_path):
         check_output_dir(tmp_path / "f", "--out")
     with pytest.raises(ImpactvalError, match="--curve .* is under .*which is a file"):
         check_output_file(tmp_path / "f" / "x.csv", "--curve")
+
+
+#: two scenes refused at load (round 17's unseen batch): a ball pair whose Hertz approach passes 0.1 R, and a ball whose
+#: contact patch is wider than the beam it hits
+_TOO_FAST = """[ball]\nradius = 0.011885\nvelocity = 11.37\nmaterial = "tungsten-carbide"\n
+[target]\nkind = "ball"\nradius = 0.0092036\nmaterial = "pmma"\nvelocity = -1.976\n"""
+_TOO_NARROW = """[ball]\nradius = 0.010361\nvelocity = 20.43\nmaterial = "pmma"\n
+[target]\nkind = "beam"\nmaterial = "titanium"\nsupport = "simply-supported"\nlength = 0.46122\nwidth = 0.0035278
+height = 0.0054005\nimpact_at = 0.72\ntheory = "timoshenko"\n"""
+
+
+@pytest.mark.parametrize("command", [["run", "--engines", "mujoco", "--out"], ["theory", "--out"], ["sweep", "--engines",
+                                                                                            "mujoco", "--out"]])
+def test_every_refused_scene_of_a_batch_is_named_at_once(tmp_path, command):
+    """A batch with several bad files names each of them (one error line each, with its field and fix) and runs
+    nothing, so one round of fixes suffices (each file used to be found by its own rerun); a single bad file keeps
+    its one line."""
+    fast, narrow = tmp_path / "fast.toml", tmp_path / "narrow.toml"
+    fast.write_text(_TOO_FAST)
+    narrow.write_text(_TOO_NARROW)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(main, command + [str(out), str(fast), "plate_steel", str(narrow)])
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert all(ln.startswith("impactval: error: ") for ln in lines), res.output
+    assert len(lines) == 3, res.output
+    assert "fast.toml: [ball] the Hertz approach" in lines[0] and "radius" in lines[0]
+    assert "narrow.toml: [target] the Hertz contact patch" in lines[1] and "wider beam" in lines[1]
+    assert "2 of 3 scenes refused" in lines[2]
+    assert not out.exists(), "nothing may run (or be stored) when a scene of the batch is refused"
+    res = CliRunner().invoke(main, command + [str(out), str(narrow), "plate_steel"])
+    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output
+    res = CliRunner().invoke(main, ["reference", str(fast), str(narrow)])      # no output folder: the same lines
+    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 3, res.output
