@@ -62,9 +62,14 @@ def tune(engine, scene, speeds, contact, dt, out, store, restitutions, start, ma
     click.echo(f"impactval tune: {engine} on {sc.name}, {len(vs)} speeds, contact {contact}", err=True)
     from impactval.runner import RunInterrupted
 
+    from impactval.progress import make_progress
+
+    def said(objective, options, residuals):     # a line per fit evaluation (each runs one job per speed)
+        click.echo(f"impactval tune: {T.evaluation_line(objective, options, residuals, max_evals)}", err=True)
+
     try:
         result = T.tune(engine, sc, vs, contact=contact, dt=dt, store=store_where, workers=jobs, tol=tol, start=start,
-                        max_nfev=max_evals)
+                        max_nfev=max_evals, progress=lambda: make_progress("auto"), on_evaluation=said)
     except RunInterrupted as stop:
         click.echo(f"impactval tune: interrupted; the finished engine runs are stored in {store_where}: rerun the "
                    f"same command to resume the fit", err=True)

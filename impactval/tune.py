@@ -360,11 +360,15 @@ class EngineObjective:
 
     def __init__(self, scene, engine: str, speeds: Sequence[float], settings, options_of: Callable[[np.ndarray], dict],
                  store, workers: int | None = None, quantities: Sequence[str] = ("t_m", "f_m"), tol: float = 1e-6,
-                 keep_series: bool = False) -> None:
+                 keep_series: bool = False, progress: Callable[[], Any] | None = None,
+                 on_evaluation: Callable[["EngineObjective", dict[str, Any], np.ndarray], None] | None = None) -> None:
         self.scene, self.engine, self.speeds = scene, engine, list(speeds)
         self.settings, self.options_of, self.store, self.workers = settings, options_of, store, workers
         # series are always kept: the final evaluation may reuse a fit job and the report plots its f(t)
         self.quantities, self.tol, self.keep_series = tuple(quantities), tol, True
+        # progress: a factory of the runner's progress displays (one per evaluation: a display is closed when its
+        # jobs are done); on_evaluation(objective, options, residuals) after each evaluation
+        self.progress, self.on_evaluation = progress, on_evaluation
         self.record = FitRecord()
 
     def jobs(self, params: np.ndarray):
@@ -381,7 +385,8 @@ class EngineObjective:
         jobs = self.jobs(params)
         found = self.store.find({j.key for j in jobs}, REUSABLE_STATUSES)
         rows = execute(jobs, store=self.store, workers=self.workers, keep_series=self.keep_series,
-                       command="impactval tune", theory_gap=False)   # fits contact parameters: no beam-theory split
+                       command="impactval tune", theory_gap=False,  # fits contact parameters: no beam-theory split
+                       progress=self.progress() if self.progress is not None else None)
         self.record.evaluations += 1
         self.record.engine_runs += len({j.key for j in jobs} - set(found))
         self.record.jobs_reused += len(set(found))
@@ -399,6 +404,8 @@ class EngineObjective:
     def __call__(self, params: np.ndarray) -> np.ndarray:
         res = self.residuals_of(self.rows(params))
         self.record.history.append(([float(x) for x in params], float(np.sum(res**2))))
+        if self.on_evaluation is not None:
+            self.on_evaluation(self, self.options_of(np.asarray(params, float)), res)
         return res
 
 
@@ -410,6 +417,18 @@ def fit(objective: EngineObjective, x0: Sequence[float], bounds=(-np.inf, np.inf
 
     return optimize.least_squares(objective, np.asarray(x0, float), bounds=bounds, diff_step=diff_step,
                                   xtol=1e-8, ftol=1e-10, max_nfev=max_nfev)
+
+
+def evaluation_line(objective: EngineObjective, options: dict[str, Any], residuals: np.ndarray,
+                    max_nfev: int | None = None) -> str:
+    """One line on a fit evaluation just done: its number (of at most max_nfev, the Jacobian's steps not counted
+    by least_squares' budget), the options tried, the largest |error| over the speeds in % and the work so far."""
+    r = objective.record
+    worst = float(np.max(np.abs(residuals))) if len(residuals) else math.nan
+    opts = ", ".join(f"{k}={v}" for k, v in options.items())
+    of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
+    return (f"evaluation {r.evaluations}{of}: {opts}: largest |error| {100 * worst:.3g} % over {len(objective.speeds)} "
+            f"speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
 
 
 # ---------------------------------------------------------------------------- the tune driver
@@ -466,7 +485,8 @@ def _fmt(x: float) -> str:
 
 def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", dt: float | None = None,
          store=None, workers: int | None = None, tol: float = 1e-6, start: float | None = None,
-         max_nfev: int = 30, integrator: str | None = None, timeout_s: float = 600.0) -> Tuned:
+         max_nfev: int = 30, integrator: str | None = None, timeout_s: float = 600.0,
+         progress: Callable[[], Any] | None = None, on_evaluation: Callable[..., None] | None = None) -> Tuned:
     """Fit `engine`'s native contact parameters so its impacts on `scene` match the reference at `speeds`.
 
     Parameters
@@ -481,6 +501,9 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
     store : Store, SQLite path or URL (the fit's engine runs; a rerun resumes from it)
     start : starting stiffness for the fit [N/m or N/m^1.5] (default: the closed form)
     max_nfev : most least-squares evaluations (each one engine job per speed)
+    progress : factory of a runner progress display (`impactval.progress.make_progress`), one per evaluation
+    on_evaluation : called as on_evaluation(objective, options, residuals) after each fit evaluation (residuals:
+        signed fractions, the quantities per speed); `evaluation_line` words it
 
     Returns a `Tuned` (options usable as `--option KEY=VALUE` with `impactval run --contact native`).
     """
@@ -577,16 +600,17 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
             before = {"contact_stiffness": float(_fmt(k0_energy(mass, alpha, v_mid))), "contact_exponent": 1.0,
                       "contact_damping": 0.0} if contact == "native" else options_of(np.array([x_start]))
             quantities = ("t_m", "f_m", "delta_m") if contact == "native-hertz" else ("t_m", "f_m")
-        objective = EngineObjective(scene, engine, speeds, settings, options_of, db, workers, quantities, tol)
+        objective = EngineObjective(scene, engine, speeds, settings, options_of, db, workers, quantities, tol,
+                                    progress=progress, on_evaluation=on_evaluation)
         sol = fit(objective, [x_start], diff_step=1e-4 if contact == "native-hertz" else 1e-3, max_nfev=max_nfev)
         best = objective.options_of(sol.x)
         final = EngineObjective(scene, engine, speeds, settings, lambda p: best, db, workers, quantities, tol,
-                                keep_series=True)
+                                keep_series=True, progress=progress)
         rows = final.rows(np.zeros(1))
         before_rows: list[dict[str, Any]] = []
         if before:
             prev = EngineObjective(scene, engine, speeds, settings, lambda p: before, db, workers, quantities, tol,
-                                   keep_series=True)
+                                   keep_series=True, progress=progress)
             before_rows = prev.rows(np.zeros(1))
             objective.record.engine_runs += prev.record.engine_runs
         objective.record.engine_runs += final.record.engine_runs

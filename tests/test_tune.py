@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 
@@ -355,6 +356,12 @@ def test_tune_command_writes_json_report_plot(tmp_path):
     data = json.loads((out / "tuned.json").read_text())
     assert data["engine"] == "mujoco" and data["engine_runs"] >= 4
     assert "--option mujoco.solref=" in proc.stdout
+    # progress on stderr (a fit on a beam runs for many minutes): each engine job as it ends, then a line per fit
+    # evaluation with the options tried and the largest error so far (it said nothing until the end before)
+    evals = [ln for ln in proc.stderr.splitlines() if ln.startswith("impactval tune: evaluation ")]
+    assert len(evals) == data["evaluations"] >= 2, proc.stderr
+    assert "solref=" in evals[0] and "largest |error|" in evals[0] and "engine runs" in evals[0], evals[0]
+    assert re.search(r"\[\d/2\] plate_steel\[v=2\] / mujoco dt=\S+: ok", proc.stderr), proc.stderr
     md = (out / "tune.md").read_text()
     assert '<pair geom1="BALL" geom2="TARGET"' in md and "| 0.8 |" in md and "m_eff" in md
     pytest.importorskip("matplotlib")
