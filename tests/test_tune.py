@@ -420,3 +420,24 @@ def test_ball_on_ball_restitution_is_of_the_relative_motion():
         assert t.restitution == pytest.approx(1.0, rel=1e-6)
         r = impactval.solve(T.at_speed(scene, t.speed), tol=1e-6)
         assert -r.rebound_velocity == pytest.approx((m1 - m2) / (m1 + m2) * t.speed, rel=1e-6)
+
+
+def test_fit_stops_when_it_no_longer_improves_and_keeps_its_best_point():
+    """Engine runs are costly: a fit whose squared error stops falling (a linear spring on a light, flexible beam,
+    whose contact splits differently at every stiffness: noisy at the 1e-3 level) ends after STALL_EVALS evaluations
+    without a STALL_REL gain, at the best point it saw, instead of spending its whole budget (an unseen cantilever:
+    30 evaluations, 152 engine jobs, 44 min at 116-117 % from the 10th on; 17 with the rule). A smooth problem still
+    converges."""
+    calls = []
+
+    def noisy(x):          # flat at 1.0 with a deterministic ripple of 1e-4: nothing left to gain
+        calls.append(float(x[0]))
+        return np.array([1.0 + 1e-4 * math.sin(1e4 * x[0]), 0.5])
+
+    sol = T.fit(noisy, [0.1], max_nfev=30)
+    assert len(calls) <= T.STALL_EVALS + 2, calls          # the first, then STALL_EVALS without a gain (+ a Jacobian)
+    seen = list(calls)
+    costs = [1.0 + 1e-4 * math.sin(1e4 * c) for c in seen]          # first residual; the second is constant
+    assert 1.0 + 1e-4 * math.sin(1e4 * float(sol.x[0])) == pytest.approx(min(costs), rel=1e-12)
+    smooth = T.fit(lambda x: np.array([x[0] - 2.0, 0.1 * (x[0] - 2.0)]), [0.0], max_nfev=30)
+    assert smooth.x[0] == pytest.approx(2.0, abs=1e-6)
