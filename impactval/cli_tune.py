@@ -60,12 +60,11 @@ def tune(engine, scene, speeds, contact, dt, out, store, restitutions, start, ma
     out_dir.mkdir(parents=True, exist_ok=True)
     store_where = store or str(out_dir / "tune.sqlite")
     click.echo(f"impactval tune: {engine} on {sc.name}, {len(vs)} speeds, contact {contact}", err=True)
+    from impactval.progress import make_progress
     from impactval.runner import RunInterrupted
 
-    from impactval.progress import make_progress
-
     def said(objective, options, residuals):     # a line per fit evaluation (each runs one job per speed)
-        click.echo(f"impactval tune: {T.evaluation_line(objective, options, residuals, max_evals)}", err=True)
+        click.echo(f"impactval tune: {_evaluation_line(objective, options, residuals, max_evals)}", err=True)
 
     try:
         result = T.tune(engine, sc, vs, contact=contact, dt=dt, store=store_where, workers=jobs, tol=tol, start=start,
@@ -118,6 +117,19 @@ def _plot(data, result, sc, store_where, path):
             r = impactval.solve(T.at_speed(sc, t.speed))
             ref[t.speed] = (r.t, r.f)
     return R.force_plot(data, series, ref, path)
+
+
+def _evaluation_line(objective, options: dict, residuals, max_nfev: int | None = None) -> str:
+    """One line on a fit evaluation just done: its number (of at most max_nfev, the Jacobian's steps not counted
+    by least_squares' budget), the options tried, the largest |error| over the speeds in % and the work so far."""
+    import numpy as np
+
+    r = objective.record
+    worst = float(np.max(np.abs(residuals))) if len(residuals) else math.nan
+    opts = ", ".join(f"{k}={v}" for k, v in options.items())
+    of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
+    return (f"evaluation {r.evaluations}{of}: {opts}: largest |error| {100 * worst:.3g} % over {len(objective.speeds)} "
+            f"speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
 
 
 def _console(data) -> str:

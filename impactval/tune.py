@@ -454,18 +454,6 @@ def fit(objective: EngineObjective, x0: Sequence[float], bounds=(-np.inf, np.inf
                                                f"error by {STALL_REL:g} of it")
 
 
-def evaluation_line(objective: EngineObjective, options: dict[str, Any], residuals: np.ndarray,
-                    max_nfev: int | None = None) -> str:
-    """One line on a fit evaluation just done: its number (of at most max_nfev, the Jacobian's steps not counted
-    by least_squares' budget), the options tried, the largest |error| over the speeds in % and the work so far."""
-    r = objective.record
-    worst = float(np.max(np.abs(residuals))) if len(residuals) else math.nan
-    opts = ", ".join(f"{k}={v}" for k, v in options.items())
-    of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
-    return (f"evaluation {r.evaluations}{of}: {opts}: largest |error| {100 * worst:.3g} % over {len(objective.speeds)} "
-            f"speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
-
-
 # ---------------------------------------------------------------------------- the tune driver
 
 @dataclass
@@ -538,7 +526,7 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
     max_nfev : most least-squares evaluations (each one engine job per speed)
     progress : factory of a runner progress display (`impactval.progress.make_progress`), one per evaluation
     on_evaluation : called as on_evaluation(objective, options, residuals) after each fit evaluation (residuals:
-        signed fractions, the quantities per speed); `evaluation_line` words it
+        signed fractions, the quantities per speed); the CLI prints a line per evaluation from it
 
     Returns a `Tuned` (options usable as `--option KEY=VALUE` with `impactval run --contact native`).
     """
