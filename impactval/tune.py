@@ -411,7 +411,7 @@ class EngineObjective:
 
 #: a fit stops once STALL_EVALS evaluations in a row (finite-difference steps included) have not lowered the best
 #: sum of squared errors by more than STALL_REL of it: engine runs are costly, and where the contact law cannot match
-#: the reference (a linear spring on a light, flexible beam, whose contact splits differently at every stiffness) the
+#: the reference (a linear spring on a light, flexible beam, where the first contact can split into several) the
 #: objective is noisy at the 1e-3 level and least_squares' own tolerances (xtol 1e-8, ftol 1e-10) never stop it
 #: (an unseen cantilever, 127 x 4.4 x 1.65 mm titanium under a 3.7 mm WC ball: all 30 evaluations, 152 engine jobs,
 #: 44 min, its largest error 116-117 % from the 10th on; with this rule 17 evaluations, the same residuals within 0.3 %

@@ -424,7 +424,7 @@ def test_ball_on_ball_restitution_is_of_the_relative_motion():
 
 def test_fit_stops_when_it_no_longer_improves_and_keeps_its_best_point():
     """Engine runs are costly: a fit whose squared error stops falling (a linear spring on a light, flexible beam,
-    whose contact splits differently at every stiffness: noisy at the 1e-3 level) ends after STALL_EVALS evaluations
+    where the first contact can split into several: noisy at the 1e-3 level) ends after STALL_EVALS evaluations
     without a STALL_REL gain, at the best point it saw, instead of spending its whole budget (an unseen cantilever:
     30 evaluations, 152 engine jobs, 44 min at 116-117 % from the 10th on; 17 with the rule). A smooth problem still
     converges."""
