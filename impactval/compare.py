@@ -55,8 +55,9 @@ GRAZING_FRACTION = 0.02
 GRAZING_WINDOW = 0.05
 
 
-def contact_cut(result: ImpactResult, ref: ImpactResult) -> str:
-    """"" or one line when t_m compares differently cut first contacts (engine vs reference): the engine's contact
+def contact_cut(result: ImpactResult, ref: ImpactResult, against: str = "the reference") -> str:
+    """"" or one line when t_m compares differently cut first contacts (engine vs reference; `against` names the
+    reference in the line: "the linear theory" for a linear contact law's row): the engine's contact
     goes on past the reference's separation though its force fell below GRAZING_FRACTION of its f_m next to it (it
     bridged a separation the reference makes, e.g. a ball that re-touches a ringing beam 15 us later), or it ends
     where the reference's force dips below GRAZING_FRACTION of f_m without separating (it split the contact). Near-
@@ -87,11 +88,11 @@ def contact_cut(result: ImpactResult, ref: ImpactResult) -> str:
             or after.max() < GRAZING_FRACTION * f_m:
         return ""
     if later:
-        what = (f"its force fell to {100 * low:.2g} % of its f_m at {t[k]:.4g} s, next to the reference's separation "
-                f"at {t_ref:.4g} s, and rose again: it bridged a separation the reference makes")
+        what = (f"its force fell to {100 * low:.2g} % of its f_m at {t[k]:.4g} s, next to {against}'s separation "
+                f"at {t_ref:.4g} s, and rose again: it bridged a separation {against} makes")
     else:
-        what = (f"it separated at {t_eng:.4g} s, where the reference's force falls to {100 * low:.2g} % of f_m "
-                f"({t[k]:.4g} s) and rises again: it split a contact the reference keeps")
+        what = (f"it separated at {t_eng:.4g} s, where {against}'s force falls to {100 * low:.2g} % of f_m "
+                f"({t[k]:.4g} s) and rises again: it split a contact {against} keeps")
     return (f"t_m compares differently cut contacts ({what}); near-grazing, a small force difference moves t_m by a "
             f"whole re-contact: read f_m, delta_m and the curve")
 
