@@ -525,6 +525,15 @@ def _check_kind(scene) -> None:
         raise EngineError(f"mujoco: target kind {kind!r} is not supported; supported: {', '.join(SUPPORTED_KINDS)}.")
 
 
+def check_scene(scene, contact: str) -> None:
+    """EngineError when this adapter cannot build `scene` with `contact` (a `skipped` row; `impactval tune` refuses
+    up front)."""
+    _check_kind(scene)
+    if scene.target.kind == "modal" and contact != "hertz":
+        raise EngineError(f"mujoco: a modal target has no surface to collide with; use contact 'hertz' "
+                          f"(got {contact!r}).")
+
+
 class MujocoAdapter(SteppingAdapter):
     """MuJoCo (`pip install 'impactval[mujoco]'`); see the module docstring for the model."""
 
@@ -584,10 +593,7 @@ class MujocoAdapter(SteppingAdapter):
         """The scene as a MuJoCo model at first touch, ready to step."""
         import mujoco
 
-        _check_kind(scene)
-        if scene.target.kind == "modal" and settings.contact != "hertz":
-            raise EngineError(f"mujoco: a modal target has no surface to collide with; use contact 'hertz' "
-                              f"(got {settings.contact!r}).")
+        check_scene(scene, settings.contact)
         info: dict = {}
         chain = self.chain(scene, settings)
         xml, lay = build_xml(scene, settings, chain)

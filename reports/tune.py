@@ -134,6 +134,15 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
     if before.get("residuals"):
         opts = ", ".join(f"`{k}={v}`" for k, v in before["options"].items())
         out += residual_table(before["residuals"], f"Before ({opts})")
+    if tuned.get("scan"):
+        out += ["### Stiffness scan before the fit (flexible target: the closed form is the rigid plate's)", "",
+                "Least squares starts from the best of these; the fitted options are the best point of every "
+                "evaluation. Errors over the fitted quantities and speeds.", "",
+                "| options | largest error % | sum of squared errors |", "|---|---:|---:|"]
+        for r in tuned["scan"]:
+            opts = ", ".join(f"`{k}={v}`" for k, v in r["options"].items())
+            out.append(f"| {opts} | {100 * r['largest']:.3g} | {r['sum_sq']:.4g} |")
+        out.append("")
     out += ["## Springs by speed (closed form, rigid plate)", "",
             f"A linear spring gives t_m * f_m = pi m v, Hertz 3.679 m v: the ratio {cf['linear_product_ratio']:.4f} "
             "means no k matches both. Single best k over the range (log least squares): "
