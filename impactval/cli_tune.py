@@ -80,6 +80,9 @@ def tune(engine, scene, speeds, contact, dt, out, store, restitutions, start, ma
         plot = _plot(data, result, sc, store_where, out_dir / "tune_force.png")
     (out_dir / "tune.md").write_text(R.markdown(data, e_list, plot.name if plot else None))
     click.echo(_console(data))
+    for note in result.notes:       # a fit that lost to the default: said where the options are read too
+        if note.startswith("The engine's default options"):
+            click.echo(f"impactval tune: warning: {note}", err=True)
     click.echo(f"tuned: {path}; report: {out_dir / 'tune.md'}; {result.engine_runs} engine runs", err=True)
     if any(r["status"] != "ok" for r in result.residuals):
         sys.exit(1)

@@ -717,6 +717,12 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
                      f"speed (Hertz: v^-1/5). k_by_speed gives the speed-dependent springs.")
     if engine == "pybullet":
         notes.append(f"globalCFM = ERP/(k dt) holds for dt = {dt:g} s only: recompute it for another step.")
+    if before_rows:
+        after_sq, before_sq = (float(np.sum(objective.residuals_of(r) ** 2)) for r in (rows, before_rows))
+        if before_sq < after_sq:
+            notes.append(f"The engine's default options (Before) match the reference better than the fitted ones "
+                         f"(sum of squared errors over {', '.join(quantities)}: {before_sq:.4g} against "
+                         f"{after_sq:.4g}): the fit did not find the better point; keep the default, or give --start.")
     opts = {prefix + k: v for k, v in best.items()}
     return Tuned(engine=engine, scene=scene.name, contact=contact, dt=dt, speeds=speeds, options=opts,
                  residuals=_residual_rows(rows, speeds), engine_runs=objective.record.engine_runs,

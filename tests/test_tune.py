@@ -496,3 +496,16 @@ def test_a_flexible_targets_fit_scans_the_stiffness_before_least_squares():
     T.fit(obj, [x0], max_nfev=30)
     x_best, cost = T.best_evaluated(obj.record)
     assert x_best[0] == pytest.approx(0.9 * math.log(10.0), abs=1e-2) and cost < 0.01     # the pocket: > 0.3
+
+
+def test_a_fit_worse_than_the_engines_default_says_so(tmp_path):
+    """A fit that ends worse than the engine's default options (here one evaluation from a start 100x too stiff) says
+    so in its notes with both sums of squared errors, instead of presenting the worse options as tuned."""
+    pytest.importorskip("mujoco")
+    k_comp = T.linear_compromise(M, T.hertz_targets(PLATE, (0.3, 1.0, 3.0), 1e-6))
+    tuned = T.tune("mujoco", PLATE, (0.3, 1.0, 3.0), store=str(tmp_path / "t.sqlite"), workers=1, max_nfev=1,
+                   start=100 * k_comp)
+    note = next(n for n in tuned.notes if n.startswith("The engine's default options (Before) match"))
+    worse = sum(r["err_t_m"] ** 2 + r["err_f_m"] ** 2 for r in tuned.residuals)
+    default = sum(r["err_t_m"] ** 2 + r["err_f_m"] ** 2 for r in tuned.before_residuals)
+    assert default < worse and f"{default:.4g} against {worse:.4g}" in note
