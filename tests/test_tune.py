@@ -463,16 +463,15 @@ class _Landscape:
     closed form) and the true minimum 0.9 decades above it, where the engine's default spring also sits near; a
     discontinuity between them like a first contact that splits near-grazing. Records evaluations like the real one."""
 
-    def __init__(self):
-        self.record = T.FitRecord()
+    def __init__(self, decades: float = 0.9, pocket: bool = True):
+        self.record, self.far, self.pocket = T.FitRecord(), decades * math.log(10.0), pocket
 
     def options_of(self, p):
         return {"k": float(math.exp(p[0]))}
 
     def __call__(self, p):
-        x = float(p[0])
-        far = 0.9 * math.log(10.0)
-        res = (np.array([0.6 + 0.2 * (x - 0.05) ** 2, 0.4]) if x < 0.5 * far
+        x, far = float(p[0]), self.far
+        res = (np.array([0.6 + 0.2 * (x - 0.05) ** 2, 0.4]) if self.pocket and x < 0.5 * far
                else np.array([0.05 + 0.3 * (x - far) ** 2, 0.02]))
         self.record.evaluations += 1
         self.record.history.append(([x], float(np.sum(res**2))))
@@ -490,7 +489,7 @@ def test_a_flexible_targets_fit_scans_the_stiffness_before_least_squares():
     obj = _Landscape()
     default = math.log(10.0) * 0.8                                      # the engine's default spring
     rows = T.scan(obj, 0.0, [default], "eng.")
-    assert len(rows) == len(T.SCAN_DECADES) + 1 and all(set(r) == {"options", "sum_sq", "largest"} for r in rows)
+    assert len(rows) >= len(T.SCAN_DECADES) + 1 and all(set(r) == {"options", "sum_sq", "largest"} for r in rows)
     assert all(set(r["options"]) == {"eng.k"} for r in rows)
     x0 = float(T.best_evaluated(obj.record)[0][0])
     T.fit(obj, [x0], max_nfev=30)
@@ -509,3 +508,18 @@ def test_a_fit_worse_than_the_engines_default_says_so(tmp_path):
     worse = sum(r["err_t_m"] ** 2 + r["err_f_m"] ** 2 for r in tuned.residuals)
     default = sum(r["err_t_m"] ** 2 + r["err_f_m"] ** 2 for r in tuned.before_residuals)
     assert default < worse and f"{default:.4g} against {worse:.4g}" in note
+
+
+def test_a_scan_whose_best_point_is_an_end_goes_on_that_way():
+    """The spring that fits best can lie beyond the scan's two decades (the cantilever: best at the top of the grid):
+    the scan goes on a step at a time while the error falls, at most SCAN_EXTEND steps, and stops once it rises."""
+    obj = _Landscape(decades=2.2, pocket=False)
+    rows = T.scan(obj, 0.0)
+    tried = [math.log10(r["options"]["k"]) for r in rows]
+    assert len(rows) == len(T.SCAN_DECADES) + 3 and tried[-3:] == pytest.approx([1.5, 2.0, 2.5])
+    x0 = float(T.best_evaluated(obj.record)[0][0])
+    assert x0 == pytest.approx(2.0 * math.log(10.0))
+    T.fit(obj, [x0], max_nfev=30)
+    assert T.best_evaluated(obj.record)[0][0] == pytest.approx(2.2 * math.log(10.0), abs=0.1)   # 0.04 decades
+    far = _Landscape(decades=9.0, pocket=False)
+    assert len(T.scan(far, 0.0)) == len(T.SCAN_DECADES) + T.SCAN_EXTEND
