@@ -130,7 +130,10 @@ def _evaluation_line(objective, options: dict, residuals, max_nfev: int | None =
     r = objective.record
     worst = float(np.max(np.abs(residuals))) if len(residuals) else math.nan
     opts = ", ".join(f"{k}={v}" for k, v in options.items())
-    of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
+    if getattr(objective, "phase", "fit") == "scan":
+        of = " (scanning the spring before the fit)"
+    else:
+        of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
     return (f"evaluation {r.evaluations}{of}: {opts}: largest |error| {100 * worst:.3g} % over {len(objective.speeds)} "
             f"speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
 

@@ -371,6 +371,8 @@ class EngineObjective:
         # jobs are done); on_evaluation(objective, options, residuals) after each evaluation
         self.progress, self.on_evaluation = progress, on_evaluation
         self.record = FitRecord()
+        #: "scan" while `scan` evaluates its grid, "fit" otherwise (the CLI's progress line says which)
+        self.phase = "fit"
 
     def jobs(self, params: np.ndarray):
         from impactval.jobs import Job
@@ -492,17 +494,21 @@ def scan(objective: EngineObjective, x_start: float, extra: Sequence[float] = ()
         out.append({"options": {prefix + k: v for k, v in objective.options_of(np.array([x])).items()},
                     "sum_sq": seen[x], "largest": float(np.max(np.abs(res)))})
 
-    for x in scan_points(x_start, extra):
-        at(x)
-    step = (SCAN_DECADES[1] - SCAN_DECADES[0]) * math.log(10.0)
-    for _ in range(SCAN_EXTEND):
-        best = min(seen, key=seen.get)
-        if best == max(seen):
-            at(best + step)
-        elif best == min(seen):
-            at(best - step)
-        else:
-            break
+    objective.phase = "scan"
+    try:
+        for x in scan_points(x_start, extra):
+            at(x)
+        step = (SCAN_DECADES[1] - SCAN_DECADES[0]) * math.log(10.0)
+        for _ in range(SCAN_EXTEND):
+            best = min(seen, key=seen.get)
+            if best == max(seen):
+                at(best + step)
+            elif best == min(seen):
+                at(best - step)
+            else:
+                break
+    finally:
+        objective.phase = "fit"
     return out
 
 

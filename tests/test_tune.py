@@ -465,6 +465,7 @@ class _Landscape:
 
     def __init__(self, decades: float = 0.9, pocket: bool = True):
         self.record, self.far, self.pocket = T.FitRecord(), decades * math.log(10.0), pocket
+        self.speeds, self.phases = [1.0], []
 
     def options_of(self, p):
         return {"k": float(math.exp(p[0]))}
@@ -475,6 +476,7 @@ class _Landscape:
                else np.array([0.05 + 0.3 * (x - far) ** 2, 0.02]))
         self.record.evaluations += 1
         self.record.history.append(([x], float(np.sum(res**2))))
+        self.phases.append(getattr(self, "phase", None))
         return res
 
 
@@ -492,6 +494,13 @@ def test_a_flexible_targets_fit_scans_the_stiffness_before_least_squares():
     assert len(rows) >= len(T.SCAN_DECADES) + 1 and all(set(r) == {"options", "sum_sq", "largest"} for r in rows)
     assert all(set(r["options"]) == {"eng.k"} for r in rows)
     x0 = float(T.best_evaluated(obj.record)[0][0])
+    from impactval.cli_tune import _evaluation_line
+
+    assert obj.phases == ["scan"] * len(rows) and obj.phase == "fit"         # the progress line says which
+    assert "(budget 30 + Jacobian steps)" in _evaluation_line(obj, {"k": 1.0}, np.array([0.1]), 30)
+    obj.phase = "scan"
+    assert "scanning the spring" in _evaluation_line(obj, {"k": 1.0}, np.array([0.1]), 30)
+    obj.phase = "fit"
     T.fit(obj, [x0], max_nfev=30)
     x_best, cost = T.best_evaluated(obj.record)
     assert x_best[0] == pytest.approx(0.9 * math.log(10.0), abs=1e-2) and cost < 0.01     # the pocket: > 0.3
