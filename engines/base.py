@@ -475,9 +475,14 @@ class EngineAdapter:
             return failed("nan", steps=k, t=float(t[k]) if len(t) else math.nan, dt=dt, limit=lim)
         e = np.asarray(sim.energy, float)
         if e.size and e[0] > 0:
-            growth = float(np.max(e) / e[0] - 1.0)
+            # by magnitude: a chain blowing up past its limit can drive an engine's total energy far below zero (an
+            # unseen clamped beam, MuJoCo at 1.01x its limit: 1.006 E0 through the tail, then -2.4 and -10.7 E0 in
+            # two steps), which a check of the largest value alone passed as "ok"
+            growth = float(np.max(np.abs(e)) / e[0] - 1.0)
             if sim.stop == "energy" or growth > self.energy_growth_limit or not np.all(np.isfinite(e)):
-                return failed("energy", _energy_onset(t, d, f, e, self.energy_growth_limit),
+                negative = (f"; the total energy went negative ({float(np.min(e)) / e[0]:.3g} x its initial value)"
+                            if np.isfinite(e).all() and np.min(e) < 0 else "")
+                return failed("energy", _energy_onset(t, d, f, e, self.energy_growth_limit) + negative,
                               growth=_growth_text(growth), allowed=self.energy_growth_limit, dt=dt, limit=lim)
         if sim.stop == "through":
             return failed("through", delta=float(np.max(d)), steps=sim.n_steps, dt=dt, limit=lim)
@@ -623,7 +628,7 @@ def _energy_onset(t: np.ndarray, delta: np.ndarray, f: np.ndarray, energy: np.nd
     finitely), else where it did, after that contact had ended: the growth is in the window after it (--tail), so
     a shorter tail keeps the first contact's row (MuJoCo Warp's float32 chain grows from ~3 ms after touch on the
     worked beam)."""
-    over = ~(energy / energy[0] - 1.0 <= allowed)           # non-finite counts as over
+    over = ~(np.abs(energy) / energy[0] - 1.0 <= allowed)   # non-finite counts as over; by magnitude (result_from)
     if not over.any():
         return ""
     k = int(np.argmax(over))
@@ -637,8 +642,9 @@ def _energy_onset(t: np.ndarray, delta: np.ndarray, f: np.ndarray, energy: np.nd
 
 
 def _growth_text(growth: float) -> str:
-    """'by 12%' for modest growth, 'by a factor 3.4e+12' for an explosion."""
-    return f"by {growth:.0%}" if growth < 10 else f"by a factor {1 + growth:.2g}"
+    """'by 12.3%' for modest growth (3 digits: 5.04 % is not 'by 5% (limit 5%)'), 'by a factor 3.4e+12' for an
+    explosion."""
+    return f"by {100 * growth:.3g}%" if growth < 10 else f"by a factor {1 + growth:.2g}"
 
 
 def _parabola_peak(t: np.ndarray, y: np.ndarray, k: int) -> float:

@@ -67,6 +67,7 @@ def plate_scene():
 @pytest.mark.parametrize("cls, status, words", [
     ("NanAfter", Status.UNSTABLE, "NaN/inf after"),
     ("EnergyGrows", Status.UNSTABLE, "energy grew by 20%"),
+    ("EnergyGoesNegative", Status.UNSTABLE, "the total energy went negative (-3 x its initial value)"),
     ("ThroughTarget", Status.UNSTABLE, "went through the target"),
     ("NeverLeaves", Status.UNSTABLE, "did not end within the window cap"),
     ("Raises", Status.CRASHED, "ZeroDivisionError: boom"),
