@@ -321,9 +321,9 @@ def _check_beam_shape(src: str, beam: Any, radius: float, delta_m: float) -> Non
                          f"{1 - height / length:.3g}.")
     patch = math.sqrt(radius * delta_m)
     if patch > 0.5 * width:
-        raise SceneError(f"{src}: [target] the Hertz contact patch (radius sqrt(R delta_m) = {patch:.3g} m) is wider "
-                         f"than the beam (width {width:g} m): the face is not locally flat; use a wider beam or a "
-                         f"smaller ball.")
+        raise SceneError(f"{src}: [target] the Hertz contact patch (diameter 2 sqrt(R delta_m) = {2 * patch:.3g} m) "
+                         f"is wider than the beam (width {width:g} m): the face is not locally flat; use a width of "
+                         f"at least {2 * patch:.3g} m, or a smaller or slower ball.")
 
 
 def check_answer(scene_name: str, **values: float) -> None:

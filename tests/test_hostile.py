@@ -371,7 +371,13 @@ def test_every_refused_scene_of_a_batch_is_named_at_once(tmp_path, command):
     assert all(ln.startswith("impactval: error: ") for ln in lines), res.output
     assert len(lines) == 3, res.output
     assert "fast.toml: [ball] the Hertz approach" in lines[0] and "radius" in lines[0]
-    assert "narrow.toml: [target] the Hertz contact patch" in lines[1] and "wider beam" in lines[1]
+    assert "narrow.toml: [target] the Hertz contact patch" in lines[1] and "use a width of at least" in lines[1]
+    import re
+
+    # the patch's diameter, the width asked for, exceeds the beam's 3.53 mm (the old line gave its radius, 2.4 mm,
+    # and read as false: 'radius 0.0024 m is wider than the beam (width 0.0035 m)')
+    needed = float(re.search(r"at least ([0-9.e+-]+) m", lines[1]).group(1))
+    assert needed > 0.0035278 and f"= {needed:.3g} m)" in lines[1]
     assert "2 of 3 scenes refused" in lines[2]
     assert not out.exists(), "nothing may run (or be stored) when a scene of the batch is refused"
     res = CliRunner().invoke(main, command + [str(out), str(narrow), "plate_steel"])
