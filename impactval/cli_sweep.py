@@ -110,10 +110,18 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
         df = sw.run_sweep(cells, out=out, store=store, workers=jobs, scheduler=scheduler, force=force,
                           progress=make_progress("auto"), command=command)
     except RunInterrupted as stop:
-        if len(stop.rows):
-            write_outputs(sw.reference_columns(stop.rows, scenes, tol), out, unders, kinds, plot=not no_plot, tol=tol)
-        click.echo(f"impactval: {stop}; rerun the same command to run the rest; report of what finished: "
-                   f"{Path(out) / 'sweep.md'}", err=True)
+        report = Path(out) / "sweep.md"
+        try:
+            if len(stop.rows):
+                rows = sw.reference_columns(stop.rows, scenes, tol, getattr(stop, "references", None))
+                write_outputs(rows, out, unders, kinds, plot=not no_plot, tol=tol)
+                where = f"report of what finished: {report}"
+            else:                       # nothing to analyse: say so in the report the line points to
+                write_nothing_finished(out, stop, stop.total, command)
+                where = f"no cell finished (see {report})"
+        except KeyboardInterrupt:
+            where = "interrupted again while writing the report (every finished cell is stored)"
+        click.echo(f"impactval: {stop}; rerun the same command to run the rest; {where}", err=True)
         sys.exit(stop.exit_code)
     try:
         write_outputs(df, out, unders, kinds, plot=not no_plot, tol=tol)
@@ -134,9 +142,30 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
     click.echo(f"report: {Path(out) / 'sweep.md'}")
 
 
+#: cheapest.csv: the fractions of `impactval.sweep.cheapest` exported in % as NAME_pct (the convention of
+#: results.csv, impactval.store.PERCENT_COLUMNS): under (the tolerance), score (the setting's largest error),
+#: best_score (the least largest error in the grid)
+CHEAPEST_PERCENT = {"under": "under_pct", "score": "largest_error_pct", "best_score": "best_score_pct"}
+#: cheapest.csv columns, in order
+CHEAPEST_COLUMNS = ("scene", "engine", "under_pct", "setting", "integrator", "dt", "segments", "contact",
+                    "stepping_time_s", "largest_error_pct", "best_score_pct", "measured_step_time_s")
+
+
+def write_nothing_finished(out, stop, n_cells: int, command: str) -> Path:
+    """DIR/sweep.md of a sweep interrupted before any cell finished: says so (there is nothing to analyse)."""
+    from impactval.reports.sweep import nothing_finished_markdown
+
+    path = Path(out) / "sweep.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(nothing_finished_markdown(n_cells, str(stop), command))
+    return path
+
+
 def write_outputs(df, out, unders: list[float], scene_kinds: dict[str, str], plot: bool = True,
                   tol: float | None = None) -> dict[str, Path]:
     """DIR/orders.csv, DIR/cheapest.csv, the plots and DIR/sweep.md from a sweep's rows."""
+    import pandas as pd
+
     from impactval import sweep as sw
     from impactval.reports.sweep import plot_error_vs_dt, plot_error_vs_time, sweep_markdown
 
@@ -145,11 +174,11 @@ def write_outputs(df, out, unders: list[float], scene_kinds: dict[str, str], plo
     paths = {"orders": out / "orders.csv", "cheapest": out / "cheapest.csv", "report": out / "sweep.md"}
     sw.orders_table(df, scene_kinds).to_csv(paths["orders"], index=False)
     cheap = sw.cheapest(df, unders)
-    cheap = cheap.rename(columns={"cost_s": "stepping_time_s", "step_time_s": "measured_step_time_s",
-                                  "score": "largest_error"})
+    cheap = cheap.rename(columns={"cost_s": "stepping_time_s", "step_time_s": "measured_step_time_s"})
+    for frac, pct in CHEAPEST_PERCENT.items():     # fractions exported in % as NAME_pct, as results.csv does
+        cheap[pct] = 100.0 * pd.to_numeric(cheap[frac], errors="coerce")
     cheap["setting"] = ["found" if f else "none in this grid" for f in cheap["found"]]
-    cheap[["scene", "engine", "under", "setting", "integrator", "dt", "segments", "contact", "stepping_time_s",
-           "largest_error", "best_score", "measured_step_time_s"]].to_csv(paths["cheapest"], index=False)
+    cheap[list(CHEAPEST_COLUMNS)].to_csv(paths["cheapest"], index=False)
     plots = []
     if plot:
         plots += [p for p in plot_error_vs_time(df, unders, out / "error_vs_time") if p.suffix == ".png"]

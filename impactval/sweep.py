@@ -565,40 +565,66 @@ def _floor_cause(d: pd.DataFrame, g: pd.DataFrame, fine: pd.Series, floor: float
     return "; ".join(causes) or "not identified"
 
 
+#: what the adapter base's message says of a cell whose dt is above the predicted explicit stability limit: it
+#: is refused before stepping (status "unstable", 0 steps; engines.base MESSAGES["dt-limit"]), so it tells nothing
+#: about where the engine really goes unstable
+REFUSED_MARKER = "refused before stepping"
+
+
+def refused_before_stepping(df: pd.DataFrame) -> pd.Series:
+    """True for the rows refused before stepping (dt above the predicted limit; never stepped): status "unstable"
+    and the adapter base's refusal in the message."""
+    msg = df["message"].fillna("").astype(str) if "message" in df else pd.Series("", index=df.index)
+    return (df["status"].astype(str) == "unstable") & msg.str.contains(REFUSED_MARKER, regex=False)
+
+
 def stability(df: pd.DataFrame) -> pd.DataFrame:
     """Observed stability limit per series next to the predicted one.
 
     `dt_stable_max`: the largest dt that ran ok below the smallest unstable dt; `dt_limit_observed`:
-    the smallest dt that went unstable (NaN: none in the grid); `dt_limit_predicted`: the smallest
-    `dt_limit` the rows report (NaN when the engine predicts none).
+    the smallest dt whose cell is "unstable", stepped or refused (NaN: none in the grid);
+    `dt_unstable_stepped`: the smallest dt that was stepped and went unstable (NaN: none), the only
+    observation of the real limit; `dt_refused_min`: the smallest dt refused before stepping because it
+    is above the predicted limit (NaN: none; such a cell says nothing about the real limit);
+    `dt_limit_predicted`: the smallest `dt_limit` the rows report (NaN when the engine predicts none);
+    `n_failed`: cells not ok (refused ones included), `n_refused`: cells refused before stepping.
     """
     d = with_score(df)
+    refused = refused_before_stepping(d)
     rows = []
     for key, g in d.groupby(list(SERIES), sort=False):
         st = g["status"].astype(str)
+        ref = refused.loc[g.index]
         unstable = g.loc[st == "unstable", "dt"]
         lim = float(unstable.min()) if len(unstable) else math.nan
+        stepped = g.loc[(st == "unstable") & ~ref, "dt"]
+        refused_dt = g.loc[ref, "dt"]
         okdt = g.loc[st == "ok", "dt"]
         below = okdt[okdt < lim] if math.isfinite(lim) else okdt
         pred = pd.to_numeric(g["dt_limit"], errors="coerce") if "dt_limit" in g else pd.Series(dtype=float)
         rows.append(dict(zip(SERIES, key), dt_stable_max=float(below.max()) if len(below) else math.nan,
                          dt_limit_observed=lim,
+                         dt_unstable_stepped=float(stepped.min()) if len(stepped) else math.nan,
+                         dt_refused_min=float(refused_dt.min()) if len(refused_dt) else math.nan,
                          dt_limit_predicted=float(pred.min()) if pred.notna().any() else math.nan,
-                         n_failed=int((~st.isin(["ok", "skipped", "not-installed"])).sum())))
-    return pd.DataFrame(rows, columns=[*SERIES, "dt_stable_max", "dt_limit_observed", "dt_limit_predicted",
-                                       "n_failed"])
+                         n_failed=int((~st.isin(["ok", "skipped", "not-installed"])).sum()),
+                         n_refused=int(ref.sum())))
+    return pd.DataFrame(rows, columns=[*SERIES, "dt_stable_max", "dt_limit_observed", "dt_unstable_stepped",
+                                       "dt_refused_min", "dt_limit_predicted", "n_failed", "n_refused"])
 
 
 def orders_table(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> pd.DataFrame:
     """DIR/orders.csv: fitted orders (per metric) with the observed and predicted stability limits
     of their series. Columns: scene, engine, integrator, order, dt_min, dt_max, dt_limit_observed,
     dt_limit_predicted, then contact, segments, metric, nominal_order, n_points, scatter, clean,
-    explanation."""
+    explanation, dt_unstable_stepped, dt_refused_min (see `stability`: dt_limit_observed counts cells refused
+    before stepping too; dt_unstable_stepped only the stepped ones)."""
     o = fit_orders(df, scene_kinds)
     s = stability(df)
     m = o.merge(s, on=list(SERIES), how="left")
     cols = ["scene", "engine", "integrator", "order", "dt_min", "dt_max", "dt_limit_observed", "dt_limit_predicted",
-            "contact", "segments", "metric", "nominal_order", "n_points", "scatter", "clean", "explanation"]
+            "contact", "segments", "metric", "nominal_order", "n_points", "scatter", "clean", "explanation",
+            "dt_unstable_stepped", "dt_refused_min"]
     return m[cols]
 
 
@@ -612,30 +638,114 @@ def _ref_uncertainty(ref) -> float:
     return max(vals) if vals else math.nan
 
 
-def reference_columns(df: pd.DataFrame, scenes: Iterable, tol: float) -> pd.DataFrame:
-    """The rows with `ref_tol` and `ref_uncertainty` (largest relative uncertainty the reference
-    reports at `tol`; one solve per scene) for the floor analysis."""
-    import impactval
+def _say_of(progress: Any):
+    """The progress display's `note` (one line on stderr, above a live display), or None (silent)."""
+    note = getattr(progress, "note", None)
+    return note if callable(note) else None
 
+
+def _took(seconds: float) -> str:
+    from impactval.progress import _fmt_s
+
+    return _fmt_s(seconds)
+
+
+@lru_cache(maxsize=None)
+def _announcing_class() -> type:
+    """A `impactval.runner.References` that says on stderr, in the progress display's style, each reference it
+    solves (scene, tolerance, then the time it took): at tol 1e-9 one solve can take 10-15 s, during which no cell's
+    row can be written (the rows wait for their reference)."""
+    import time
+
+    from impactval.jobs import canonical_scene
+    from impactval.runner import THEORY_GAP_TOL, References
+
+    class AnnouncingReferences(References):
+        def __init__(self, say=None, known=()) -> None:
+            super().__init__(known)
+            self.say = say
+
+        def _timed(self, what: str, fn):
+            if self.say is None:
+                return fn()
+            self.say(f"{what}: solving ...")
+            t0 = time.monotonic()
+            res = fn()
+            ok = getattr(res, "success", True)
+            msg = "" if ok else f": {str(getattr(res, 'message', ''))[:160]}"
+            self.say(f"{what}: {'solved' if ok else 'failed'} in {_took(time.monotonic() - t0)}{msg}")
+            return res
+
+        def ref(self, job):
+            if (canonical_scene(job.scene), job.tol) in self._ref:
+                return super().ref(job)
+            return self._timed(f"reference {job.scene.name} (tol {job.tol:g})", lambda: References.ref(self, job))
+
+        def theory(self, job):
+            if getattr(job.scene.target, "kind", "") != "beam" or \
+                    (canonical_scene(job.scene), job.tol) in self._theory:
+                return super().theory(job)
+            self.ref(job)                   # announced on its own first
+            other = ("timoshenko" if getattr(job.scene.target, "theory", "euler-bernoulli") == "euler-bernoulli"
+                     else "euler-bernoulli")
+            return self._timed(f"reference {job.scene.name}, {other} theory for the beam-theory gap "
+                               f"(tol {max(job.tol, THEORY_GAP_TOL):g})", lambda: References.theory(self, job))
+
+        def lin(self, job, res):
+            before, t0 = len(self._lin), time.monotonic()
+            out = super().lin(job, res)
+            if self.say is not None and len(self._lin) > before:      # a new spring's linear theory was solved
+                self.say(f"linear-theory reference {job.scene.name} (tol {job.tol:g}): solved in "
+                         f"{_took(time.monotonic() - t0)}")
+            return out
+
+    return AnnouncingReferences
+
+
+def announcing_references(progress: Any = None):
+    """An `impactval.runner.References` (references solved once per scene and tolerance, handed to
+    `impactval.runner.execute`) that says each solve on `progress` (its `note`: one line on stderr, as the cells'
+    lines): "reference NAME (tol 1e-09): solving ..." then "... solved in 14.6 s"."""
+    return _announcing_class()(_say_of(progress))
+
+
+def reference_columns(df: pd.DataFrame, scenes: Iterable, tol: float, references: Any = None) -> pd.DataFrame:
+    """The rows with `ref_tol` and `ref_uncertainty` (largest relative uncertainty the reference
+    reports at `tol`; one solve per scene, reusing those `references` (an `impactval.runner.References`, e.g.
+    `announcing_references`, which also says each new solve) already holds) for the floor analysis. A reference
+    that cannot be solved leaves NaN."""
+    from impactval.jobs import Job as _J
+
+    refs = references if references is not None else announcing_references(None)
     d = df.copy()
-    unc = {s.name: _ref_uncertainty(impactval.solve(s, tol=tol)) for s in scenes if s.name in set(d["scene"])}
+    names = set(d["scene"]) if "scene" in d else set()
+    unc = {}
+    for s in scenes:
+        if s.name in names:
+            try:
+                unc[s.name] = _ref_uncertainty(refs.ref(_J(s, "reference", None, tol)))
+            except Exception:  # noqa: BLE001 - the floor analysis goes on without the reference's uncertainty
+                unc[s.name] = math.nan
     d["ref_tol"] = tol
-    d["ref_uncertainty"] = d["scene"].map(unc)
+    d["ref_uncertainty"] = d["scene"].map(unc) if "scene" in d else math.nan
     return d
 
 
 def run_sweep(jobs: list[Job], *, out=None, store=None, workers: int | None = None, scheduler: Any = None,
               force: bool = False, progress: Any = None, on_row=None, command: str = "sweep",
-              keep_series: bool = False) -> pd.DataFrame:
+              keep_series: bool = False, references: Any = None) -> pd.DataFrame:
     """Run the grid through the result store and the executor (`impactval.runner.execute`): each
     cell isolated in a reusable engine worker, `workers` at a time (default: the cores) or on a
     Dask `scheduler`; every row stored as it finishes, so a killed sweep rerun with the same store
     runs only the missing cells (`force` recomputes). The store defaults to out/impactval.sqlite
     (in memory without `out`); with `out`, results.csv and frequencies.csv are regenerated from it.
 
+    Each reference is solved once per scene (when its first computed cell finishes) and said on `progress`
+    (scene, tolerance, time: `announcing_references`; or give `references`, an `impactval.runner.References`).
+
     Returns one row per cell (`impactval.runner.COLUMNS`, errors as signed fractions) plus
     `ref_tol` and `ref_uncertainty`. Raises `impactval.runner.RunInterrupted` on Ctrl-C/SIGTERM
-    (its `rows` hold the finished cells) after writing the exports.
+    (its `rows` hold the finished cells, its `references` those solved) after writing the exports.
     """
     from pathlib import Path
 
@@ -646,13 +756,15 @@ def run_sweep(jobs: list[Job], *, out=None, store=None, workers: int | None = No
     if store is None and out is not None:
         store = Path(out) / "impactval.sqlite"
     db = store if isinstance(store, Store) else Store(store)
+    refs = references if references is not None else announcing_references(progress)
     try:
         rows = execute(jobs, store=db, workers=workers, scheduler=scheduler, force=force, progress=progress,
-                       out=out, command=command, on_row=on_row, keep_series=keep_series)
+                       out=out, command=command, on_row=on_row, keep_series=keep_series, references=refs)
     except RunInterrupted as stop:
         if out is not None:
             export(db, out)
         stop.rows = pd.DataFrame(stop.rows, columns=list(COLUMNS))
+        stop.references = refs
         raise
     if out is not None:
         export(db, out)
@@ -661,4 +773,4 @@ def run_sweep(jobs: list[Job], *, out=None, store=None, workers: int | None = No
     tols = {j.tol for j in jobs}
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     scenes = list({j.scene.name: j.scene for j in jobs}.values())
-    return reference_columns(df, scenes, min(tols)) if len(df) else df
+    return reference_columns(df, scenes, min(tols), refs) if len(df) else df

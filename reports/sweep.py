@@ -147,11 +147,17 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     out += _table(["scene", "engine", "integrator", "N", "floor %", "from dt [s]", "reached", "cause"],
                   [[r["scene"], r["engine"], r["integrator"], r["segments"], _pct(r["floor"]), _g(r["dt_floor"]),
                     "yes" if r["reached"] else "no", r["cause"]] for _, r in floors.iterrows()])
-    out += ["", "## Stability limits (observed in the grid vs predicted by the engine model)", ""]
-    out += _table(["scene", "engine", "integrator", "N", "largest stable dt [s]", "smallest unstable dt [s]",
-                   "predicted limit [s]", "failed cells"],
+    out += ["", "## Stability limits (observed in stepped cells vs predicted by the engine model)", "",
+            "A cell whose dt is above the engine's predicted explicit limit is refused before stepping (status "
+            "unstable, 0 steps, message \"refused before stepping\"): it is not an observation, so only stepped cells "
+            "bracket the real limit and test the prediction.", ""]
+    out += _table(["scene", "engine", "integrator", "N", "largest stable dt [s]", "smallest unstable dt, stepped [s]",
+                   "refused above the predicted limit (not stepped), from dt [s]", "predicted limit [s]",
+                   "prediction", "failed cells"],
                   [[r["scene"], r["engine"], r["integrator"], _n(r["segments"]), _g(r["dt_stable_max"]),
-                    _g(r["dt_limit_observed"]) or "none", _g(r["dt_limit_predicted"]) or "n/a", str(r["n_failed"])]
+                    _g(r["dt_unstable_stepped"]) or "none", _g(r["dt_refused_min"]) or "none",
+                    _g(r["dt_limit_predicted"]) or "n/a", _prediction_verdict(r),
+                    str(r["n_failed"]) + (f" ({r['n_refused']} refused)" if r["n_refused"] else "")]
                    for _, r in stab.iterrows()])
     out += ["", f"## Pareto front (each cell more than {100 * sw.FRONT_GAIN:g} % more accurate than every cheaper one)",
             ""]
@@ -171,6 +177,19 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     out += _table(["scene", "engine", "integrator", "N", "dt [s]", "status", "t_m %", "f_m %", "delta_m %",
                    "largest %", "cost ms", "measured ms", "steps", "steps/s", "model error %", "dt limit [s]", "front",
                    "message"], rows)
+    return "\n".join(out) + "\n"
+
+
+def nothing_finished_markdown(n_cells: int, why: str = "", command: str = "") -> str:
+    """sweep.md of a sweep stopped before any cell finished: nothing to analyse, and how to go on."""
+    out = ["# impactval sweep", "",
+           f"**No cell finished**: the sweep was interrupted before any of its {n_cells} cells was stored"
+           + (f" ({why})" if why else "") + ", so there is no result to analyse: no cheapest setting, order, "
+           "floor or stability limit.", "",
+           "Rerun the same command to run them: cells are stored as they finish, so a rerun runs only the ones "
+           "missing, and an interrupted run's report covers the cells that finished."]
+    if command:
+        out += ["", f"Command: `{command}`"]
     return "\n".join(out) + "\n"
 
 
@@ -203,12 +222,23 @@ def _series_name(r) -> str:
 
 
 def _stability_summary(s: pd.DataFrame) -> str:
-    """One line: each series that went unstable (with the predicted limit and whether it brackets
-    the observation), then the rest in one phrase, flagging predictions the grid contradicts."""
+    """One line: each series that went unstable when stepped or had cells refused above its predicted limit
+    (with the predicted limit and, for stepped cells only, whether it brackets the observation), then the rest
+    in one phrase, flagging predictions the grid contradicts."""
     bits = []
-    for _, r in s[s["dt_limit_observed"].notna()].iterrows():
+    for _, r in s[s["dt_unstable_stepped"].notna()].iterrows():
         bits.append(f"{_series_name(r)}: {_stability_sentence(r)}")
-    rest = s[s["dt_limit_observed"].isna()]
+    refused_only = s[s["dt_unstable_stepped"].isna() & s["dt_refused_min"].notna()]
+    if len(refused_only) == 1:
+        r = refused_only.iloc[0]
+        bits.append(f"{_series_name(r)}: {_stability_sentence(r)}")
+    elif len(refused_only):
+        each = ", ".join(f"{_series_name(r)} ({_stable_text(r['dt_stable_max'])}, predicted limit "
+                         f"{_g(r['dt_limit_predicted'])} s, refused from {_g(r['dt_refused_min'])} s)"
+                         for _, r in refused_only.iterrows())
+        bits.append(f"{each}: every dt above a predicted limit was refused above the predicted limit (not "
+                    f"stepped) and no stepped cell went unstable, so this grid does not observe these limits")
+    rest = s[s["dt_unstable_stepped"].isna() & s["dt_refused_min"].isna()]
     if len(rest):
         top = rest["dt_stable_max"].max()
         raw = pd.to_numeric(rest["dt_limit_predicted"], errors="coerce")
@@ -234,18 +264,52 @@ def _stability_summary(s: pd.DataFrame) -> str:
     return "; ".join(bits) + "."
 
 
+def _stable_text(ok: float) -> str:
+    return f"stable up to {_g(ok)} s" if math.isfinite(ok) else "no stable cell"
+
+
+def _brackets(r) -> bool | None:
+    """Whether the predicted limit lies between the largest stable and the smallest unstable *stepped* dt
+    (None: no such bracket of stepped cells, or no finite prediction)."""
+    obs, ok, pred = r["dt_unstable_stepped"], r["dt_stable_max"], r["dt_limit_predicted"]
+    if not (math.isfinite(obs) and math.isfinite(ok) and math.isfinite(pred)):
+        return None
+    return ok <= pred * 1.0001 and pred <= obs * 1.0001
+
+
+def _prediction_verdict(r) -> str:
+    """The Stability table's verdict on the predicted limit, from stepped cells only."""
+    pred, ok = r["dt_limit_predicted"], r["dt_stable_max"]
+    hit = _brackets(r)
+    if hit is not None:
+        return "brackets the observed limit" if hit else "misses the observed bracket"
+    if math.isfinite(pred) and math.isfinite(ok) and ok > pred:
+        return "conservative (ran stably above it)"
+    if math.isfinite(r["dt_refused_min"]) and not math.isfinite(r["dt_unstable_stepped"]):
+        return "not tested: the cells above it were refused, not stepped"
+    return ""
+
+
 def _stability_sentence(r) -> str:
-    obs, ok, pred = r["dt_limit_observed"], r["dt_stable_max"], r["dt_limit_predicted"]
+    obs, ok, pred = r["dt_unstable_stepped"], r["dt_stable_max"], r["dt_limit_predicted"]
+    refused = r["dt_refused_min"]
     pred_s = (f"predicted limit {_g(pred)} s" if math.isfinite(pred) else
               "no explicit stability limit (implicit integrator)" if pred == math.inf else
               "no predicted limit from the engine model")
+    refused_s = (f"; refused above the predicted limit from {_g(refused)} s (not stepped)"
+                 if math.isfinite(refused) else "")
     if math.isfinite(obs):
         lo = f"stable at {_g(ok)} s, " if math.isfinite(ok) else ""
-        agree = ""
-        if math.isfinite(pred) and math.isfinite(ok):
-            agree = (" (the prediction brackets it)" if ok <= pred * 1.0001 and pred <= obs * 1.0001
-                     else " (the prediction misses the observed bracket)")
-        return f"{lo}unstable from {_g(obs)} s; {pred_s}{agree}"
+        hit = _brackets(r)
+        agree = "" if hit is None else (" (the prediction brackets it)" if hit
+                                        else " (the prediction misses the observed bracket)")
+        return f"{lo}unstable from {_g(obs)} s (stepped); {pred_s}{agree}{refused_s}"
+    if math.isfinite(refused):
+        lo = f"stable at every dt stepped (up to {_g(ok)} s)" if math.isfinite(ok) else "no stable cell"
+        beyond = (" (ran stably above the predicted limit: the prediction is conservative)"
+                  if math.isfinite(pred) and math.isfinite(ok) and ok > pred else "")
+        return (f"{lo}; {pred_s}{beyond}{refused_s}: no stepped cell went unstable, so this grid does not "
+                f"observe the limit")
     if math.isfinite(ok):
         beyond = ""
         if math.isfinite(pred) and ok > pred:

@@ -304,7 +304,7 @@ def test_sweep_command_writes_every_output(tmp_path):
     assert list(orders.columns[:8]) == ["scene", "engine", "integrator", "order", "dt_min", "dt_max",
                                         "dt_limit_observed", "dt_limit_predicted"]
     cheap = pd.read_csv(out / "cheapest.csv")
-    assert list(cheap.columns[:3]) == ["scene", "engine", "under"] and len(cheap) == 2
+    assert list(cheap.columns[:3]) == ["scene", "engine", "under_pct"] and len(cheap) == 2
     report = (out / "sweep.md").read_text()
     for heading in ("## In a minute", "Cheapest under 0.1 %", "## Orders of convergence", "## Floors",
                     "## Stability limits", "## Pareto front", "## All cells"):
@@ -336,11 +336,11 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
     assert 0 < len(found) < len(cheap)          # some tolerances met, some not (0.5 % on a 41-link chain)
     for _, c in cheap.iterrows():
         mine = rows[(rows["scene"] == c["scene"]) & (rows["engine"] == c["engine"]) & rows["score"].notna()]
-        under = mine[mine["score"] < c["under"]]
+        under = mine[mine["score"] < c["under_pct"] / 100]
         if c["setting"] != "found":
-            assert under.empty and c["best_score"] == pytest.approx(mine["score"].min())
+            assert under.empty and c["best_score_pct"] == pytest.approx(100 * mine["score"].min())
             continue
-        assert c["largest_error"] < c["under"]
+        assert c["largest_error_pct"] < c["under_pct"]
         assert not (under["cost_s"] < c["stepping_time_s"]).any()
     reruns: dict[tuple, float] = {}
     for _, c in found.iterrows():
@@ -357,7 +357,7 @@ def test_cheapest_rows_hold_when_rerun_with_impactval_run(tmp_path):
             again = sw.with_score(pd.read_csv(tmp_path / f"rerun{k}" / "results.csv"))
             assert len(again) == 1 and again["integrator"].iloc[0] == c["integrator"]
             reruns[setting] = float(again["score"].iloc[0])
-        assert reruns[setting] < c["under"], (setting, reruns[setting], c["under"])
+        assert reruns[setting] < c["under_pct"] / 100, (setting, reruns[setting], c["under_pct"])
 
 
 UNSEEN_CC = str(Path(__file__).parent / "unseen" / "cc_aluminium_0p3.toml")
@@ -488,3 +488,181 @@ def test_too_few_steps_for_an_order_says_so():
     rows = _series(errs=[1e-3, 2.5e-4, 6e-5], dts=[1e-6, 5e-7, 2.5e-7])
     o = sw.fit_orders(pd.DataFrame(rows))
     assert o["order"].isna().all() and o["explanation"].str.contains("3 stable time steps").all()
+
+
+# ---------------------------------------------------------------------------- the report, as a user reads it
+def _stab_rows():
+    """Two series of one scene: N = 41 whose cells above the predicted limit were refused before stepping (the
+    adapter base's own message), N = 81 whose 1e-6 cell was stepped and went unstable."""
+    from impactval.engines.base import message
+
+    refusal = lambda dt: message("dt-limit", dt=dt, limit=7.88e-7, what="Euler, Hencky chain N = 41",  # noqa: E731
+                                 suggest=2e-7)[1]
+    base = dict(scene="s", engine="mujoco", contact="hertz", integrator="Euler", err_f_m=np.nan,
+                err_delta_m=np.nan, wall_time_step_s=0.1, n_steps=0, t_m=np.nan, f_m=np.nan, delta_m=np.nan,
+                ref_t_m=1.0, ref_f_m=1.0, ref_delta_m=1.0)
+    rows = [dict(base, segments="41", dt=dt, status="unstable", err_t_m=np.nan, message=refusal(dt), dt_limit=7.88e-7)
+            for dt in (2e-6, 1e-6)]
+    rows.append(dict(base, segments="41", dt=5e-7, status="ok", err_t_m=1e-3, message="", dt_limit=7.88e-7,
+                     n_steps=300))
+    rows.append(dict(base, segments="81", dt=1e-6, status="unstable", err_t_m=np.nan, dt_limit=7.35e-7,
+                     message="NaN/inf after 41 steps (t = 4.1e-05 s, dt = 1e-06 s; predicted limit 7.35e-07 s)"))
+    rows.append(dict(base, segments="81", dt=5e-7, status="ok", err_t_m=1e-3, message="", dt_limit=7.35e-7,
+                     n_steps=300))
+    return pd.DataFrame(rows)
+
+
+def test_stability_report_tells_cells_refused_before_stepping_from_stepped_ones():
+    """fz2804: cells refused because dt is above the predicted limit (0 steps) are no observation: the report
+    must not call the refusal bracket "observed" nor say the prediction brackets it; a stepped unstable cell can."""
+    from impactval.reports.sweep import sweep_markdown
+
+    md = sweep_markdown(_stab_rows(), [0.01], {"s": "beam"})
+    line = next(ln for ln in md.splitlines() if ln.startswith("- **Stability**"))
+    n41, n81 = line.split("Euler N = 41:")[1].split("Euler N = 81:") if line.index("N = 41") < line.index(
+        "N = 81") else line.split("Euler N = 81:")[1].split("Euler N = 41:")[::-1]
+    assert "refused above the predicted limit from 1e-06 s (not stepped)" in n41, line
+    assert "unstable from" not in n41 and "brackets" not in n41, line
+    assert "unstable from 1e-06 s (stepped)" in n81 and "(the prediction brackets it)" in n81, line
+    table = md.split("## Stability limits")[1].split("## Pareto")[0]
+    assert "observed in stepped cells" in table and "refused above the predicted limit (not stepped)" in table
+    row41 = next(ln for ln in table.splitlines() if ln.startswith("| s | mujoco | Euler | 41 |"))
+    assert "| none | 1e-06 | 7.88e-07 | not tested" in row41 and "2 (2 refused)" in row41, row41
+    row81 = next(ln for ln in table.splitlines() if ln.startswith("| s | mujoco | Euler | 81 |"))
+    assert "| 1e-06 | none | 7.35e-07 | brackets the observed limit" in row81, row81
+    st = sw.stability(_stab_rows()).set_index("segments")
+    assert math.isnan(st.loc["41", "dt_unstable_stepped"]) and st.loc["41", "dt_refused_min"] == 1e-6
+    assert st.loc["81", "dt_unstable_stepped"] == 1e-6 and math.isnan(st.loc["81", "dt_refused_min"])
+    assert st.loc["41", "dt_limit_observed"] == 1e-6          # unchanged: the smallest unstable dt of either kind
+
+
+def test_sweep_interrupted_before_any_cell_points_to_a_report_that_exists(tmp_path, monkeypatch):
+    """fz2803 interrupted after 4 s with 0 cells finished: the last line named DIR/sweep.md, which did not exist.
+    Now that sweep.md exists and says nothing finished."""
+    import signal
+
+    from impactval.runner import RunInterrupted
+
+    def interrupted(*args, **kwargs):
+        raise RunInterrupted(int(signal.SIGINT), pd.DataFrame(), "run-x", 2)
+
+    monkeypatch.setattr(sw, "run_sweep", interrupted)
+    out = tmp_path / "sw"
+    res = _cli(["sweep", "plate_steel", "--engines", "mujoco", "--dt", "1e-6,5e-7", "-j", "1", "--out", str(out)])
+    assert res.exit_code == 130, res.output
+    last = res.stderr.strip().splitlines()[-1]
+    assert "rerun the same command" in last and "Traceback" not in res.output
+    for word in last.replace("(", " ").replace(")", " ").split():
+        if word.endswith("sweep.md"):
+            assert Path(word).is_file(), last          # every report it points to exists
+    text = (out / "sweep.md").read_text()
+    assert "No cell finished" in text and "2 cells" in text and "Rerun the same command" in text
+
+
+def test_cheapest_csv_says_its_units(tmp_path):
+    """cheapest.csv's tolerance and errors are in % with a _pct suffix, as results.csv's errors are (they were
+    fractions named under / largest_error / best_score next to a sweep.md in %)."""
+    from impactval.cli_sweep import write_outputs
+    from impactval.store import PERCENT_COLUMNS
+
+    assert "err_t_m" in PERCENT_COLUMNS                     # the convention followed: fraction NAME -> NAME_pct in %
+    df = pd.DataFrame(_series(errs=[4e-3, 1e-3, 2.5e-4], dts=[1e-6, 5e-7, 2.5e-7]))
+    write_outputs(df, tmp_path, [0.002, 1e-5], {"s": "beam"}, plot=False)
+    cheap = pd.read_csv(tmp_path / "cheapest.csv")
+    assert list(cheap.columns) == ["scene", "engine", "under_pct", "setting", "integrator", "dt", "segments",
+                                   "contact", "stepping_time_s", "largest_error_pct", "best_score_pct",
+                                   "measured_step_time_s"]
+    found, none = cheap.iloc[0], cheap.iloc[1]
+    assert found["under_pct"] == pytest.approx(0.2) and found["setting"] == "found"
+    assert found["largest_error_pct"] == pytest.approx(0.1) and found["dt"] == 5e-7
+    assert none["under_pct"] == pytest.approx(1e-3) and none["setting"] == "none in this grid"
+    assert none["best_score_pct"] == pytest.approx(0.025) and math.isnan(none["largest_error_pct"])
+    docs = (Path(__file__).parents[1] / "docs" / "sweep.md").read_text()
+    assert "under_pct" in docs and "largest_error_pct" in docs and "best_score_pct" in docs
+
+
+class _Notes:
+    """A progress display that records its lines."""
+
+    def __init__(self):
+        self.lines = []
+
+    def start(self, total, reused):
+        pass
+
+    def started(self, label):
+        pass
+
+    def done(self, label, row, seconds):
+        self.lines.append(f"[done] {label}")
+
+    def note(self, text):
+        self.lines.append(text)
+
+    def close(self):
+        pass
+
+
+@requires_mujoco
+def test_sweep_says_each_reference_solve_with_scene_tol_and_time(plate_scene):
+    """The references at tol 1e-9 took 9-15 s each before any cell's line, in silence: each solve is said on the
+    progress display (scene, tolerance, time taken) before the cells that wait for it."""
+    from impactval.engines.base import EngineSettings
+
+    notes = _Notes()
+    jobs = sw.build_jobs([plate_scene], ["mujoco"], EngineSettings(), dt={"mujoco": [1e-6, 5e-7]}, tol=1e-9)
+    df = sw.run_sweep(jobs, workers=1, progress=notes)
+    assert len(df) == 2 and df["ref_uncertainty"].notna().all()
+    said = [ln for ln in notes.lines if ln.startswith("reference plate_steel (tol 1e-09)")]
+    assert len(said) == 2 and said[0].endswith("solving ...") and " solved in " in said[1], notes.lines
+    assert notes.lines.index(said[1]) < next(i for i, ln in enumerate(notes.lines) if ln.startswith("[done]"))
+
+
+@requires_mujoco
+def test_sweep_command_on_a_chain_refused_above_its_limit(tmp_path):
+    """The whole command on the worked beam, N = 81 (predicted limit ~7.35e-7 s): dt = 1e-6 is refused before
+    stepping, so sweep.md says so instead of "the prediction brackets it"; stderr says the reference solve;
+    cheapest.csv is in %."""
+    out = tmp_path / "sw"
+    res = _cli(["sweep", "beam_ss_midspan", "--engines", "mujoco", "--dt", "1e-6,5e-7", "--segments", "81",
+                "--under", "1%", "-j", "1", "--out", str(out), "--no-plot"])
+    assert res.exit_code == 0, res.output
+    err = res.stderr.splitlines()
+    assert "reference beam_ss_midspan (tol 1e-09): solving ..." in err, err
+    solving = err.index("reference beam_ss_midspan (tol 1e-09): solving ...")
+    assert err[solving + 1].startswith("reference beam_ss_midspan (tol 1e-09): solved in "), err
+    report = (out / "sweep.md").read_text()
+    assert "refused above the predicted limit from 1e-06 s (not stepped)" in report and "brackets" not in report
+    cheap = pd.read_csv(out / "cheapest.csv")
+    rows = sw.with_score(pd.read_csv(out / "results.csv"))
+    assert cheap["under_pct"].tolist() == [1.0]
+    if cheap["setting"].iloc[0] == "found":
+        assert cheap["largest_error_pct"].iloc[0] == pytest.approx(100 * rows["score"].min())
+
+
+@requires_mujoco
+def test_sweep_ctrl_c_during_the_first_reference_solve_writes_a_report_saying_nothing_finished(tmp_path):
+    """The tester's case for real: SIGINT while the first reference is being solved (no cell stored yet): exit
+    130, one line, no traceback, and the sweep.md it names exists and says no cell finished."""
+    import signal
+
+    out = tmp_path / "sw"
+    cmd = [sys.executable, "-m", "impactval.cli", "sweep", "beam_ss_midspan", "--engines", "mujoco", "--dt",
+           "1e-6,5e-7", "--segments", "21", "-j", "1", "--out", str(out), "--no-plot"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    try:
+        for line in proc.stderr:
+            lines.append(line)
+            if line.startswith("reference beam_ss_midspan (tol 1e-09): solving"):
+                proc.send_signal(signal.SIGINT)
+                break
+        rest = proc.communicate(timeout=120)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = "".join(lines) + rest
+    assert proc.returncode == 130, err[-2000:]
+    assert "Traceback" not in err and "0 of 2 jobs finished" in err, err[-2000:]
+    assert f"no cell finished (see {out / 'sweep.md'})" in err
+    assert "No cell finished" in (out / "sweep.md").read_text()
