@@ -508,21 +508,32 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
 
 # ---------------------------------------------------------------------------- run --dt a,b,c
 def speed_accuracy_table(df: pd.DataFrame) -> str:
-    """Markdown section for `run --dt a,b,c`: per scene and engine, each dt with its largest error
-    [%], stepping wall time [ms], steps and status."""
+    """Markdown section for `run --dt a,b,c` (and a re-rendered sweep): per scene and engine, each dt with its
+    integrator and structure size N, largest error [%], stepping wall time [ms], steps and status; a cell refused
+    before stepping shows "-" for time and steps (it never ran), not 0."""
     d = sw.with_score(df)
+    refused = sw.refused_before_stepping(d)
     out = ["", "## Speed against accuracy", "",
            "Largest |error| of t_m, f_m, delta_m against the reference, and the stepping wall time, for each "
            "time step. `impactval sweep` adds integrators, segment counts, orders, floors and the cheapest setting "
            "under a tolerance.", "",
-           "| scene | engine | dt [s] | largest error % | step wall time [ms] | steps | status |",
-           "|---|---|---:|---:|---:|---:|---|"]
+           "| scene | engine | integrator | N | dt [s] | largest error % | step wall time [ms] | steps | status |",
+           "|---|---|---|---:|---:|---:|---:|---:|---|"]
     for (scene, engine), g in d.groupby(["scene", "engine"], sort=False):
-        for _, r in g.sort_values("dt", ascending=False).iterrows():
+        cols = [c for c in ("dt", "integrator", "segments") if c in g]
+        for i, r in g.sort_values(cols, ascending=False, key=_sort_key).iterrows():
             err = "" if not math.isfinite(r["score"]) else f"{100 * r['score']:.4f}"
-            out.append(f"| {scene} | {engine} | {r['dt']:g} | {err} | {_ms(r['cost_s'])} | {r['n_steps']} | "
-                       f"{r['status']} |")
+            never = bool(refused.loc[i])
+            status = f"{r['status']} (refused before stepping)" if never else r["status"]
+            out.append(f"| {scene} | {engine} | {r.get('integrator', '') or ''} | {_n(r.get('segments'))} | "
+                       f"{r['dt']:g} | {err} | {'-' if never else _ms(r['cost_s'])} | "
+                       f"{'-' if never else r['n_steps']} | {status} |")
     return "\n".join(out) + "\n"
+
+
+def _sort_key(col: pd.Series) -> pd.Series:
+    """Sort dt as numbers, integrator and N as text (mixed values in a re-rendered store)."""
+    return pd.to_numeric(col, errors="coerce") if col.name == "dt" else col.astype(str)
 
 
 def speed_accuracy_plot(df: pd.DataFrame, path: str | Path) -> Path | None:

@@ -292,3 +292,22 @@ def test_contact_cut_is_silent_for_an_early_separation_without_a_dip(grazing):
                     contacts=(replace(ref.contacts[0], t_end=float(ref.t[early][-1])),))
     assert short.contacts[0].t_end < 0.06 * ref.t_m
     assert contact_cut(short, ref) == ""
+
+
+@requires_mujoco
+def test_speed_table_names_integrator_and_n_and_shows_a_refused_step_as_not_run(tmp_path):
+    """`run --dt a,b` on a beam: the speed/accuracy table has the integrator and N of each row (a re-rendered sweep
+    had rows told apart by nothing), and a dt refused above the chain's predicted limit shows '-' for its time and
+    steps and says it was refused, instead of '0 ms, 0 steps' as if it had run."""
+    from impactval.runner import run
+
+    df = run(["beam_ss_midspan"], ["mujoco"], dt=[2e-7, 1e-5], out=tmp_path)
+    fine, coarse = df.sort_values("dt").iloc[0], df.sort_values("dt").iloc[1]
+    assert fine["status"] == "ok" and coarse["status"] == "unstable" and coarse["n_steps"] == 0
+    report = (tmp_path / "report.md").read_text()
+    table = report[report.index("## Speed against accuracy"):]
+    assert "| integrator | N | dt [s] |" in table
+    n = str(fine["segments"]).removesuffix(".0")
+    assert f"| beam_ss_midspan | mujoco | {fine['integrator']} | {n} | 1e-05 |  | - | - | unstable (refused before " \
+           f"stepping) |" in table, table
+    assert f"| {fine['integrator']} | {n} | 2e-07 | " in table
