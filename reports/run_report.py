@@ -221,7 +221,8 @@ def summary_section(df: pd.DataFrame, cmp: pd.DataFrame | None = None, trend: pd
     out += _md_table(header, cells)
     out += ["", "Errors are signed relative differences (engine - reference) / reference in %; the worst error "
             "is the largest |error| of t_m, f_m, delta_m over the engine's rows. Failed: crashed, timeout, "
-            "unstable, no-contact (exit 1); other: not-installed, skipped, interrupted (informative).", ""]
+            "unstable, no-contact (`impactval run` exits 1; a sweep or a map, whose grids step past limits on "
+            "purpose, does not); other: not-installed, skipped, interrupted (informative).", ""]
     return out
 
 
@@ -319,7 +320,11 @@ def reference_section(references: pd.DataFrame) -> list[str]:
 def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFrame | None = None) -> list[str]:
     """Title and one line per fact: run, date, how it ended, versions, machine, settings."""
     info = dict(info or {})
-    out = [f"# {info.pop('title', 'impactval run')}", ""]
+    # the title names the command that made the rows ("impactval sweep" for a re-rendered sweep), "impactval run"
+    # when nothing says
+    words = str(info.get("command") or "").split()
+    made_by = f"impactval {words[1]}" if len(words) > 1 and words[0] == "impactval" else "impactval run"
+    out = [f"# {info.pop('title', None) or made_by}", ""]
     labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"),
               ("finished", "finished"),
               ("ended", "how it ended"), ("versions", "versions"), ("machine", "machine"), ("suite", "suite"))

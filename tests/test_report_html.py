@@ -41,6 +41,15 @@ def test_empty_columns_are_dropped_and_summary_comes_first():
     assert "lin t_m" not in text_table(df)
 
 
+def test_a_re_rendered_reports_title_names_the_command_that_made_it():
+    """`impactval report` of a sweep's store was titled "# impactval run": the title comes from the stored command."""
+    df = rows()
+    sweep = markdown_report(df, info={"command": "impactval sweep a.toml --engines mujoco --dt 1e-6,5e-7"})
+    assert sweep.startswith("# impactval sweep\n")
+    assert markdown_report(df).startswith("# impactval run\n")
+    assert markdown_report(df, info={"command": "impactval nightly", "title": "night"}).startswith("# night\n")
+
+
 def test_engine_colours_are_defined_once_and_stable():
     assert engine_colour("mujoco") == ENGINE_COLOURS["mujoco"]
     assert engine_colour("pkg.mod:MujocoAdapter".replace("MujocoAdapter", "mujoco")) == ENGINE_COLOURS["mujoco"]
