@@ -30,7 +30,10 @@ from impactval.errors import ImpactvalError
 @click.option("--baseline", default=None, metavar="RUN_ID", help="Compare with this run  [default: the last good night]")
 @click.option("--history", "history_nights", default=14, show_default=True, type=click.IntRange(min=2),
               help="Nights in the trend plots and the wall-time step search.")
-@click.option("--dt", default="5e-8", show_default=True, type=float, help="Engine time step [s] (documented nightly setting).")
+@click.option("--dt", default="5e-8", show_default=True,
+              help="Engine time step [s] (documented nightly setting, below every engine's stability limit on the "
+                   "catalogue scenes), or auto (each engine picks a step under its predicted stability limit, as "
+                   "`run --dt auto`; for your own scenes).")
 @click.option("--contact", default="hertz", show_default=True, type=click.Choice(["hertz", "native", "native-hertz"]))
 @click.option("--integrator", default=None, help="Engine integrator (default: each engine's).")
 @click.option("--segments", default=None, type=click.IntRange(min=1), help="Beam chain segments (default: engine's).")
@@ -54,7 +57,7 @@ def nightly_command(scene, suite, engines, store, out, fail_on, threshold, basel
         progress = make_progress("auto")
     except ImportError:  # pragma: no cover - the runs-at-scale progress module
         progress = None
-    settings = _run_settings(dt, contact, integrator, segments, timeout, 0.0, modes, options)
+    settings = _run_settings(_one_dt(dt), contact, integrator, segments, timeout, 0.0, modes, options)
     command = "impactval nightly " + " ".join(sys.argv[2:] if len(sys.argv) > 2 and sys.argv[1] == "nightly"
                                               else sys.argv[1:])
     try:
@@ -75,6 +78,23 @@ def nightly_command(scene, suite, engines, store, out, fail_on, threshold, basel
         raise ImpactvalError(res.message)
     click.echo(res.message)
     sys.exit(res.exit_code)
+
+
+def _one_dt(text: str):
+    """--dt of a night: one time step [s] or "auto", parsed as `run --dt` parses it (impactval.cli._parse_dts)."""
+    from impactval.checks import RUN_LIMITS
+    from impactval.cli import _parse_dts
+
+    low, high, unit, _ = RUN_LIMITS["--dt"]
+    one = f"one time step from {low:g} to {high:g} {unit} (e.g. 5e-8) or auto"
+    try:
+        dts = _parse_dts(text)
+    except ImpactvalError:        # (the shared parser's wording offers lists and ranges: not for a night)
+        raise ImpactvalError(f"--dt must be {one}, got {text!r}.") from None
+    if len(dts) != 1:
+        raise ImpactvalError(f"--dt: a night runs {one}, got {len(dts)} steps ({text!r}); to compare several steps "
+                             "use `impactval sweep --dt`.")
+    return dts[0]
 
 
 @click.command(name="report")
