@@ -332,6 +332,17 @@ def _parse_options(items: tuple[str, ...]) -> tuple[tuple[str, object], ...]:
     return tuple(out)
 
 
+def command_line(name: str) -> str:
+    """The command line a run stores ("impactval NAME ARGS..."): NAME is the command actually running, whatever
+    sys.argv holds (a test's CliRunner, `python -m impactval.cli`), so reports can say which command made a run."""
+    import shlex
+
+    args = sys.argv[1:]
+    if args[:1] == [name]:
+        args = args[1:]
+    return f"impactval {name} " + " ".join(shlex.quote(a) for a in args)
+
+
 def _parse_dts(text: str) -> list:
     """--dt: "auto" (each engine picks), or time steps [s]: a comma list of values and ``a:b:n`` log ranges
     (the one range grammar of sweep, tune and extremes, `impactval.ranges`)."""
@@ -420,9 +431,7 @@ def run_command(scene, engines, dt, contact, integrator, segments, modes, option
     check_engine_steps(load_scenes(names) + (load_catalogue(tag) if tag else []), dts,
                        float(tail))
     _warn_if_compiling()
-    import shlex
-
-    command = "impactval " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = command_line("run")
     try:
         df = run(names, specs, settings, dt=dts if len(dts) > 1 else None, tol=tol, out=out, store=store,
                  workers=jobs, scheduler=scheduler, force=force, progress=make_progress("auto"), tag=tag,

@@ -102,7 +102,8 @@ def _one_dt(text: str):
 @click.option("--run", "run_id", default=None, help="Run id (default: the newest run in the store).")
 @click.option("--out", default=None, type=click.Path(file_okay=False),
               help="Directory for report.md, report.html and figures  [default: DIR, or ./impactval-report for a URL]")
-@click.option("--tol", default=1e-6, show_default=True, type=float, help="Reference solver tolerance.")
+@click.option("--tol", default=None, type=float,
+              help="Reference solver tolerance of the report's reference values  [default: the run's own]")
 @click.option("--list", "list_runs", is_flag=True, help="List the runs in the store and exit.")
 def report_command(store_or_dir, run_id, out, tol, list_runs) -> None:
     """Re-render the report of a run from the store: STORE_OR_DIR is an --out directory (its

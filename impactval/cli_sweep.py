@@ -105,7 +105,9 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
     from impactval.runner import RunInterrupted
 
     kinds = {s.name: s.target.kind for s in scenes}
-    command = "impactval " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    from impactval.cli import command_line
+
+    command = command_line("sweep")
     try:
         df = sw.run_sweep(cells, out=out, store=store, workers=jobs, scheduler=scheduler, force=force,
                           progress=make_progress("auto"), command=command)

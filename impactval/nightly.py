@@ -427,10 +427,12 @@ def is_dt_sweep(rows: pd.DataFrame) -> bool:
     return bool(len(d)) and bool((d.groupby(keys, dropna=False)["_dt"].nunique() > 1).any())
 
 
-def render_stored(where: str, run_id: str | None = None, out: str | Path | None = None, tol: float = 1e-6,
+def render_stored(where: str, run_id: str | None = None, out: str | Path | None = None, tol: float | None = None,
                   list_only: bool = False) -> tuple[list[str], list[Path | None]]:
     """Re-render the report of a stored run (a nightly run with its comparison and trends as on its
-    night). Returns (lines for the console, written paths)."""
+    night). `tol`: the reference tolerance of the report's reference values (default: the one the run's rows were
+    compared at, so a sweep at 1e-9 is not shown next to references re-solved at 1e-6). Returns (lines for the
+    console, written paths)."""
     from impactval import history
     from impactval.reports.build import write_report
 
@@ -458,6 +460,7 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
             upto = nruns[nruns["started_at"] <= run["started_at"]]
             me = nruns[nruns["id"] == run["id"]].iloc[-1]
             rows = db.rows(run_id=run["id"])
+            tol = tol if tol is not None else (db.run_tol(run["id"]) or 1e-6)
             cmp, base_label = None, None
             base_id = me["baseline_run_id"]
             checks = history.thresholds(str(me["checks"]).split(", ") if isinstance(me["checks"], str) and me["checks"]
@@ -478,6 +481,7 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
                                  extra_md=verdict)
         else:
             rows = db.rows(run_id=run["id"])
+            tol = tol if tol is not None else (db.run_tol(run["id"]) or 1e-6)
             extra = ""
             if is_dt_sweep(rows):      # a speed/accuracy sweep (not dt = auto: each engine its own step)
                 from impactval.reports.sweep import speed_accuracy_plot, speed_accuracy_table

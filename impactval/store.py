@@ -405,6 +405,15 @@ class Store:
             return _from_db(dict(r))
         return self._write(fn)
 
+    def run_tol(self, run_id: str) -> float | None:
+        """The smallest reference tolerance a run's jobs were compared at (None: no job, or none recorded)."""
+        sa = _sa()
+        q = (sa.select(sa.func.min(self.jobs.c.tol)).join(self.run_jobs, self.run_jobs.c.job_key == self.jobs.c.job_key)
+             .where(self.run_jobs.c.run_id == run_id))
+        with self.engine.connect() as c:
+            v = c.execute(q).scalar()
+        return float(v) if v is not None else None
+
     def rows(self, *, run_id: str | None = None, out: str | Path | None = None) -> pd.DataFrame:
         """Rows (COLUMN_TYPES columns, errors as fractions) of one run in its order, or of every run
         that wrote to the directory `out`, each job once, ordered by scene, engine and settings."""

@@ -123,9 +123,12 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
     return figures, pd.DataFrame(refs), notes
 
 
-def run_info(store, run_id: str, title: str) -> dict[str, Any]:
-    """Header facts of a run from the store."""
+def run_info(store, run_id: str, title: str | None = None) -> dict[str, Any]:
+    """Header facts of a run from the store; `title` defaults to the command that made the run ("impactval sweep"
+    for a sweep's store: a re-rendered sweep was titled "impactval run")."""
     info = store.run_info(run_id)
+    words = str(info.get("command") or "").split()
+    title = title or (f"impactval {words[1]}" if len(words) > 1 and words[0] == "impactval" else "impactval run")
     versions = {"impactval": info.get("impactval_version", ""), "reference": info.get("reference_version", "")}
     versions.update({k: v for k, v in (info.get("engines") or {}).items()})
     return {"title": title, "run_id": run_id, "command": f"`{info.get('command', '')}`" if info.get("command") else "",
@@ -134,7 +137,7 @@ def run_info(store, run_id: str, title: str) -> dict[str, Any]:
             "machine": f"{info.get('machine', '')}, Python {info.get('python', '')}"}
 
 
-def write_report(store, run_id: str, out: str | Path, *, title: str = "impactval run", rows: pd.DataFrame | None = None,
+def write_report(store, run_id: str, out: str | Path, *, title: str | None = None, rows: pd.DataFrame | None = None,
                  cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
                  history: pd.DataFrame | None = None, trend: pd.DataFrame | None = None, settings=None,
                  tol: float = 1e-6, extra_info: dict[str, Any] | None = None, extra_md: str = "",

@@ -321,8 +321,8 @@ def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFra
     """Title and one line per fact: run, date, how it ended, versions, machine, settings."""
     info = dict(info or {})
     # the title names the command that made the rows ("impactval sweep" for a re-rendered sweep), "impactval run"
-    # when nothing says
-    words = str(info.get("command") or "").split()
+    # when nothing says (reports.build.run_info gives the stored command in backticks)
+    words = str(info.get("command") or "").strip("`").split()
     made_by = f"impactval {words[1]}" if len(words) > 1 and words[0] == "impactval" else "impactval run"
     out = [f"# {info.pop('title', None) or made_by}", ""]
     labels = (("verdict", "verdict"), ("run_id", "run"), ("command", "command"), ("started", "started"),

@@ -313,6 +313,13 @@ def test_sweep_command_writes_every_output(tmp_path):
         assert (out / f"{stem}.png").stat().st_size > 5000 and (out / f"{stem}.svg").stat().st_size > 5000
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) == 8 and rows["job_key"].is_unique
+    # re-rendered from its store: titled as the sweep it is (it said "impactval run"), a row per integrator
+    again = _cli(["report", str(out), "--out", str(tmp_path / "again")])
+    assert again.exit_code == 0, again.output
+    md = (tmp_path / "again" / "report.md").read_text()
+    assert md.startswith("# impactval sweep\n")
+    table = md[md.index("## Speed against accuracy"):]
+    assert "| integrator | N |" in table and "| RK4 |" in table and "| Euler |" in table
 
 
 @requires_mujoco
@@ -638,6 +645,12 @@ def test_sweep_command_on_a_chain_refused_above_its_limit(tmp_path):
     assert cheap["under_pct"].tolist() == [1.0]
     if cheap["setting"].iloc[0] == "found":
         assert cheap["largest_error_pct"].iloc[0] == pytest.approx(100 * rows["score"].min())
+    # re-rendered: the reference values at the tolerance the rows were compared at (1e-9), not at the report
+    # command's old default (1e-6, fewer modes: other numbers next to the same errors)
+    again = _cli(["report", str(out), "--out", str(tmp_path / "again")])
+    assert again.exit_code == 0, again.output
+    md = (tmp_path / "again" / "report.md").read_text()
+    assert md.startswith("# impactval sweep\n") and "tol 1e-09)" in md and "tol 1e-06)" not in md
 
 
 @requires_mujoco
