@@ -570,6 +570,21 @@ def _residual_rows(rows: list[dict[str, Any]], speeds: Sequence[float]) -> list[
     return out
 
 
+def _check_engine_runs(engine: str, scene, speeds: Sequence[float], integrator: str | None) -> None:
+    """Refuse, before any reference is solved, a scene the engine's plan refuses with contact native (a Kirchhoff
+    plate; PyBullet on a modal target): the engine's own reason, one line. (MuJoCo's modal refusal is in its build:
+    `mujoco_effective_mass`; a scene every job skips is refused after the first evaluation, `EngineObjective`.)"""
+    from impactval.engines.base import EngineError, EngineSettings, load_adapter
+
+    adapter = load_adapter(engine)
+    try:
+        adapter.plan(at_speed(scene, max(speeds)),
+                     adapter.check_settings(EngineSettings(dt=1e-7, contact="native", integrator=integrator)))
+    except EngineError as exc:
+        raise ImpactvalError(f"tune: {str(exc).rstrip('.')}; tune needs a scene the engine runs with contact "
+                             f"native (see `impactval run`).") from None
+
+
 def _fmt(x: float) -> str:
     return f"{x:.10g}"
 
@@ -617,6 +632,7 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
                              f"approach speeds onto a second ball at rest; set target.velocity = 0 and give the "
                              f"relative speeds (v1 + v2) in --speeds (the contact depends on those only).")
     speeds = [float(v) for v in speeds]
+    _check_engine_runs(engine, scene, speeds, integrator)
     dt = float(dt) if dt is not None else default_dt(scene, speeds, engine, contact, integrator)
     targets = hertz_targets(scene, speeds, tol)
     mass, alpha = contact_mass(scene), scene.alpha
