@@ -68,7 +68,7 @@ def tune(engine, scene, speeds, contact, dt, out, store, restitutions, start, ma
 
     try:
         result = T.tune(engine, sc, vs, contact=contact, dt=dt, store=store_where, workers=jobs, tol=tol, start=start,
-                        max_nfev=max_evals, progress=lambda: make_progress("auto"), on_evaluation=said)
+                        max_nfev=max_evals, progress=_once_noting(make_progress), on_evaluation=said)
     except RunInterrupted as stop:
         click.echo(f"impactval tune: interrupted; the finished engine runs are stored in {store_where}: rerun the "
                    f"same command to resume the fit", err=True)
@@ -120,6 +120,24 @@ def _plot(data, result, sc, store_where, path):
             r = impactval.solve(T.at_speed(sc, t.speed))
             ref[t.speed] = (r.t, r.f)
     return R.force_plot(data, series, ref, path)
+
+
+def _once_noting(make_progress):
+    """A factory of progress displays (one per fit evaluation) that print each engine note once per fit: the same
+    job's caveat ("chain capped at 113 links ...") came back for every speed of every evaluation (60 lines)."""
+    seen: set[str] = set()
+
+    def factory():
+        display = make_progress("auto")
+        note = getattr(display, "note", None)
+        if callable(note):
+            def once(text: str) -> None:
+                if text not in seen:
+                    seen.add(text)
+                    note(text)
+            display.note = once
+        return display
+    return factory
 
 
 def _evaluation_line(objective, options: dict, residuals, max_nfev: int | None = None) -> str:

@@ -532,3 +532,21 @@ def test_a_scan_whose_best_point_is_an_end_goes_on_that_way():
     assert T.best_evaluated(obj.record)[0][0] == pytest.approx(2.2 * math.log(10.0), abs=0.1)   # 0.04 decades
     far = _Landscape(decades=9.0, pocket=False)
     assert len(T.scan(far, 0.0)) == len(T.SCAN_DECADES) + T.SCAN_EXTEND
+
+
+def test_tune_prints_each_engine_note_once_per_fit():
+    """The progress displays tune makes (one per evaluation) print a repeated engine note once per fit."""
+    from impactval.cli_tune import _once_noting
+
+    printed = []
+
+    class Display:
+        def note(self, text):
+            printed.append(text)
+
+    factory = _once_noting(lambda mode: Display())
+    for _ in range(3):                                  # three evaluations, two speeds each with the same caveat
+        d = factory()
+        for text in ("  note: chain capped at 113 links", "  note: chain capped at 113 links", "  note: other"):
+            d.note(text)
+    assert printed == ["  note: chain capped at 113 links", "  note: other"]
