@@ -134,9 +134,9 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
     cheap = sw.cheapest(df, unders)
     for _, c in cheap.iterrows():
         if c["found"]:
-            click.echo(f"{c['scene']} / {c['engine']} under {100 * c['under']:g} %: {c['integrator']}, dt = {c['dt']:g} s, "
-                       f"N = {c['segments'] or 'default'}: {1e3 * c['cost_s']:.3g} ms stepping, "
-                       f"largest error {100 * c['score']:.3g} %")
+            size = f", N = {c['segments']}" if c["segments"] else ""     # none for a plate or a ball pair
+            click.echo(f"{c['scene']} / {c['engine']} under {100 * c['under']:g} %: {c['integrator']}, dt = {c['dt']:g} s"
+                       f"{size}: {1e3 * c['cost_s']:.3g} ms stepping, largest error {100 * c['score']:.3g} %")
         else:
             best = (f"best {100 * c['best_score']:.3g} %" if c["best_score"] == c["best_score"]
                     else "no cell has a result: see sweep.md")

@@ -305,6 +305,7 @@ def test_sweep_command_writes_every_output(tmp_path):
                                         "dt_limit_observed", "dt_limit_predicted"]
     cheap = pd.read_csv(out / "cheapest.csv")
     assert list(cheap.columns[:3]) == ["scene", "engine", "under_pct"] and len(cheap) == 2
+    assert "plate_steel / mujoco under 0.1 %: " in res.output and "N = default" not in res.output   # a plate has no N
     report = (out / "sweep.md").read_text()
     for heading in ("## In a minute", "Cheapest under 0.1 %", "## Orders of convergence", "## Floors",
                     "## Stability limits", "## Pareto front", "## All cells"):
