@@ -279,7 +279,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
             slower = trend[trend["state"] == "slower"]
             if history.comparable(cmp) == 0:
                 code = 2
-                diff = differing_keys(df, base_rows)
+                diff = history.differing_keys(df, base_rows)
                 message = (f"nothing comparable with the baseline run {base['id']}: none of the {len(df)} rows has a "
                            f"baseline row with the same scene, engine, settings and scene hash"
                            + (f"; differing: {' | '.join(diff)}" if diff else "")
@@ -315,67 +315,6 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
         return NightlyOutcome(code, message, run_id, night, base_id, df, cmp, trend, report, page, flagged)
     finally:
         db.close()
-
-
-def differing_keys(new: pd.DataFrame, old: pd.DataFrame) -> list[str]:
-    """Why no row of `new` has a comparable baseline row in `old`: the key columns (KEY and the scene hash)
-    that actually differ, each as 'column: baseline A; now B' (impactval.history.differing_keys' wording).
-
-    A key differs when a row of this night has a value of it the baseline never had (its values are not a
-    subset of the baseline's); for a row whose every value the baseline had (a new combination), the keys
-    that alone keep it from a baseline row differ. The values shown are those of the rows concerned (and of
-    the baseline rows they would match with that key ignored, when there are any). A key whose values this
-    night are merely fewer than the baseline's (fewer scenes or engines tonight) is no difference and is left
-    out. Only when no key is found so is every key with other values listed."""
-    from impactval import history
-
-    keys = (*history.KEY, "scene_hash")
-
-    def cells(df: pd.DataFrame) -> list[tuple[tuple, bool]]:
-        """(key cells, has a result) per row."""
-        return [(tuple(history._cell(k, r[k]) if k in df else "" for k in keys), str(r.get("status", "")) == "ok")
-                for _, r in df.iterrows()]
-
-    def free(results: bool) -> tuple[str, ...]:
-        # an empty value matching any, as in history._unreported_match: a job without a result reports no
-        # integrator or N; a target without a structure to size (rigid plate, second ball) has no N
-        return history.UNREPORTED if not results else ("segments",)
-
-    def same(a, b, i: int, results: bool) -> bool:
-        return a == b or (keys[i] in free(results) and "" in (a, b))
-
-    new_cells, old_cells = cells(new), cells(old)
-    old_vals = [{c[i] for c, _ in old_cells} for i in range(len(keys))]
-    found: dict[int, tuple[set, set]] = {}           # key index -> (new row positions, old row positions)
-    hash_at = len(keys) - 1
-
-    def near(c: tuple, ok: bool, i: int) -> list[int]:
-        """The baseline rows the row `c` would match if key i alone were ignored (another scene has another hash)."""
-        ignored = (i, hash_at) if keys[i] == "scene" else (i,)
-        return [m for m, (o, o_ok) in enumerate(old_cells)
-                if o[i] != c[i] and all(same(o[n], c[n], n, ok and o_ok) for n in range(len(keys)) if n not in ignored)]
-
-    for j, (c, ok) in enumerate(new_cells):
-        known = [i for i in range(len(keys)) if not (keys[i] in free(ok) and c[i] == "")]
-        # a value the baseline never had is this row's difference (a new scene: not its hash as well); only without
-        # one, a combination of known values is, and then the keys that alone keep the row from a baseline row differ
-        new_values = [i for i in known if c[i] not in old_vals[i]]
-        if keys.index("scene") in new_values and hash_at in new_values:
-            new_values.remove(hash_at)
-        for i in new_values or known:
-            rows = near(c, ok, i) or (range(len(old_cells)) if new_values else [])
-            if rows:
-                rows_new, rows_old = found.setdefault(i, (set(), set()))
-                rows_new.add(j)
-                rows_old.update(rows)
-    every = history.differing_keys(new, old)
-    out = []
-    for i in sorted(found):
-        rows_new, rows_old = found[i]
-        line = [d for d in history.differing_keys(new.iloc[sorted(rows_new)], old.iloc[sorted(rows_old)])
-                if d.startswith(f"{keys[i]}: ")] or [d for d in every if d.startswith(f"{keys[i]}: ")]
-        out += line
-    return out or every
 
 
 def impactval_tags(name: str) -> tuple[str, ...]:

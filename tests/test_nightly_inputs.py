@@ -131,7 +131,7 @@ def _rows(*rows):
 
 
 def test_differing_keys_leave_out_keys_that_are_only_fewer_tonight():
-    from impactval.nightly import differing_keys
+    from impactval.history import differing_keys
 
     base = _rows(("a", "mujoco", "hertz", "Euler", 5e-8, "22", "h1", "ok"),
                  ("b", "mujoco", "hertz", "Euler", 5e-8, "", "h2", "ok"),
