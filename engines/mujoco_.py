@@ -565,7 +565,7 @@ class MujocoAdapter(SteppingAdapter):
         from impactval.engines.chain import chain_notes, model_error, model_error_diagnostics
         from impactval.reference.hertz import ContactLaw
 
-        _check_kind(scene)
+        check_scene(scene, settings.contact)     # refused here, as every adapter's unsupported scene (tune asks first)
         chain = self.chain(scene, settings)
         law = self.contact_law(scene, settings) or ContactLaw.hertz(scene.alpha)
         if settings.contact == "native-hertz":

@@ -572,8 +572,8 @@ def _residual_rows(rows: list[dict[str, Any]], speeds: Sequence[float]) -> list[
 
 def _check_engine_runs(engine: str, scene, speeds: Sequence[float], integrator: str | None) -> None:
     """Refuse, before any reference is solved, a scene the engine's plan refuses with contact native (a Kirchhoff
-    plate; PyBullet on a modal target): the engine's own reason, one line. (MuJoCo's modal refusal is in its build:
-    `mujoco_effective_mass`; a scene every job skips is refused after the first evaluation, `EngineObjective`.)"""
+    plate; PyBullet or MuJoCo on a modal target): the engine's own reason, one line. (A scene every job skips
+    anyway is refused after the first evaluation, `EngineObjective`.)"""
     from impactval.engines.base import EngineError, EngineSettings, load_adapter
 
     adapter = load_adapter(engine)
@@ -613,7 +613,7 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
 
     Returns a `Tuned` (options usable as `--option KEY=VALUE` with `impactval run --contact native`).
     """
-    from impactval.engines.base import EngineError, EngineSettings
+    from impactval.engines.base import EngineSettings
     from impactval.store import Store
 
     if engine not in TUNE_ENGINES:
@@ -654,11 +654,7 @@ def tune(engine: str, scene, speeds: Sequence[float], contact: str = "native", d
     params: dict[str, Any] = {}
     try:
         if engine == "mujoco":
-            try:
-                masses = mujoco_effective_mass(scene)
-            except EngineError as exc:
-                raise ImpactvalError(f"tune: {str(exc).rstrip('.')}; tune needs a scene MuJoCo runs with contact "
-                                     f"native.") from None
+            masses = mujoco_effective_mass(scene)
             m_eff = masses["m_eff"]
             params.update(m_eff=m_eff, m_invweight=masses["m_invweight"])
             closed["m_eff"] = m_eff
