@@ -348,12 +348,32 @@ def settings_for(settings: EngineSettings, spec: str) -> EngineSettings:
 class References:
     """Reference (and linear-theory) solutions, computed once per scene, tolerance and spring."""
 
-    def __init__(self, known: Iterable[tuple[Any, float, ImpactResult]] = ()) -> None:
+    def __init__(self, known: Iterable[tuple[Any, float, ImpactResult]] = (),
+                 say: Callable[[str], None] | None = None) -> None:
         from impactval.jobs import canonical_scene
 
         self._ref: dict[tuple, ImpactResult] = {(canonical_scene(sc), tol): r for sc, tol, r in known}
         self._lin: dict[tuple, ImpactResult | None] = {}
         self._theory: dict[tuple, TheoryGap | None] = {}
+        #: say(line): told of each new solve ("reference NAME (tol 1e-09): solving ...", then "... solved in 14.6 s"):
+        #: at tol 1e-9 one solve can take 10-15 s, during which no row waiting for it can be written
+        self.say = say
+
+    def _timed(self, what: str, solve: Callable[[], Any]) -> Any:
+        """solve(), said before and after (with its time) when `say` is set."""
+        if self.say is None:
+            return solve()
+        import time
+
+        from impactval.progress import _fmt_s
+
+        self.say(f"{what}: solving ...")
+        t0 = time.monotonic()
+        res = solve()
+        ok = getattr(res, "success", True)
+        why = "" if ok else f": {str(getattr(res, 'message', ''))[:160]}"
+        self.say(f"{what}: {'solved' if ok else 'failed'} in {_fmt_s(time.monotonic() - t0)}{why}")
+        return res
 
     def theory(self, job: Job) -> TheoryGap | None:
         """The scene's theory gap (beam scenes; None otherwise), computed once per scene and tolerance."""
@@ -363,7 +383,12 @@ class References:
             return None
         key = (canonical_scene(job.scene), job.tol)
         if key not in self._theory:
-            self._theory[key] = theory_gap(job.scene, self.ref(job), job.tol)
+            ref = self.ref(job)                 # said on its own first
+            theory = getattr(job.scene.target, "theory", "euler-bernoulli")
+            other = "timoshenko" if theory == "euler-bernoulli" else "euler-bernoulli"
+            self._theory[key] = self._timed(f"reference {job.scene.name}, {other} theory for the beam-theory gap (tol "
+                                            f"{max(job.tol, THEORY_GAP_TOL):g})",
+                                            lambda: theory_gap(job.scene, ref, job.tol))
         return self._theory[key]
 
     def ref(self, job: Job) -> ImpactResult:
@@ -373,10 +398,12 @@ class References:
         if key not in self._ref:
             import impactval
 
-            try:
-                self._ref[key] = impactval.solve(job.scene, tol=job.tol)
-            except ImpactvalError as exc:   # refused (e.g. over its node budget): the engine rows stand, uncompared
-                self._ref[key] = ImpactResult.failed(job.scene.name, "reference", "crashed", str(exc))
+            def solve() -> ImpactResult:
+                try:
+                    return impactval.solve(job.scene, tol=job.tol)
+                except ImpactvalError as exc:   # refused (e.g. over its node budget): the rows stand, uncompared
+                    return ImpactResult.failed(job.scene.name, "reference", "crashed", str(exc))
+            self._ref[key] = self._timed(f"reference {job.scene.name} (tol {job.tol:g})", solve)
         return self._ref[key]
 
     def solved(self, scene, tol: float) -> ImpactResult | None:
@@ -403,7 +430,8 @@ class References:
             return None
         key = (canonical_scene(job.scene), job.tol, k)
         if key not in self._lin:
-            self._lin[key] = _linear_reference(job.scene, job.tol, k)
+            self._lin[key] = self._timed(f"linear-theory reference {job.scene.name} (tol {job.tol:g})",
+                                         lambda: _linear_reference(job.scene, job.tol, k))
         return self._lin[key]
 
 

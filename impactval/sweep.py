@@ -644,69 +644,13 @@ def _say_of(progress: Any):
     return note if callable(note) else None
 
 
-def _took(seconds: float) -> str:
-    from impactval.progress import _fmt_s
-
-    return _fmt_s(seconds)
-
-
-@lru_cache(maxsize=None)
-def _announcing_class() -> type:
-    """A `impactval.runner.References` that says on stderr, in the progress display's style, each reference it
-    solves (scene, tolerance, then the time it took): at tol 1e-9 one solve can take 10-15 s, during which no cell's
-    row can be written (the rows wait for their reference)."""
-    import time
-
-    from impactval.jobs import canonical_scene
-    from impactval.runner import THEORY_GAP_TOL, References
-
-    class AnnouncingReferences(References):
-        def __init__(self, say=None, known=()) -> None:
-            super().__init__(known)
-            self.say = say
-
-        def _timed(self, what: str, fn):
-            if self.say is None:
-                return fn()
-            self.say(f"{what}: solving ...")
-            t0 = time.monotonic()
-            res = fn()
-            ok = getattr(res, "success", True)
-            msg = "" if ok else f": {str(getattr(res, 'message', ''))[:160]}"
-            self.say(f"{what}: {'solved' if ok else 'failed'} in {_took(time.monotonic() - t0)}{msg}")
-            return res
-
-        def ref(self, job):
-            if (canonical_scene(job.scene), job.tol) in self._ref:
-                return super().ref(job)
-            return self._timed(f"reference {job.scene.name} (tol {job.tol:g})", lambda: References.ref(self, job))
-
-        def theory(self, job):
-            if getattr(job.scene.target, "kind", "") != "beam" or \
-                    (canonical_scene(job.scene), job.tol) in self._theory:
-                return super().theory(job)
-            self.ref(job)                   # announced on its own first
-            other = ("timoshenko" if getattr(job.scene.target, "theory", "euler-bernoulli") == "euler-bernoulli"
-                     else "euler-bernoulli")
-            return self._timed(f"reference {job.scene.name}, {other} theory for the beam-theory gap "
-                               f"(tol {max(job.tol, THEORY_GAP_TOL):g})", lambda: References.theory(self, job))
-
-        def lin(self, job, res):
-            before, t0 = len(self._lin), time.monotonic()
-            out = super().lin(job, res)
-            if self.say is not None and len(self._lin) > before:      # a new spring's linear theory was solved
-                self.say(f"linear-theory reference {job.scene.name} (tol {job.tol:g}): solved in "
-                         f"{_took(time.monotonic() - t0)}")
-            return out
-
-    return AnnouncingReferences
-
-
 def announcing_references(progress: Any = None):
     """An `impactval.runner.References` (references solved once per scene and tolerance, handed to
     `impactval.runner.execute`) that says each solve on `progress` (its `note`: one line on stderr, as the cells'
     lines): "reference NAME (tol 1e-09): solving ..." then "... solved in 14.6 s"."""
-    return _announcing_class()(_say_of(progress))
+    from impactval.runner import References
+
+    return References(say=_say_of(progress))
 
 
 def reference_columns(df: pd.DataFrame, scenes: Iterable, tol: float, references: Any = None) -> pd.DataFrame:
