@@ -58,8 +58,9 @@ def nightly_command(scene, suite, engines, store, out, fail_on, threshold, basel
     except ImportError:  # pragma: no cover - the runs-at-scale progress module
         progress = None
     settings = _run_settings(_one_dt(dt), contact, integrator, segments, timeout, 0.0, modes, options)
-    command = "impactval nightly " + " ".join(sys.argv[2:] if len(sys.argv) > 2 and sys.argv[1] == "nightly"
-                                              else sys.argv[1:])
+    from impactval.cli import command_line
+
+    command = command_line("nightly")
     try:
         res = nightly(list(scene) or None, engines, settings, suite=suite, store=store, out=out, fail_on=fail_on,
                       threshold=threshold, baseline=baseline, history_nights=history_nights, tol=tol, workers=jobs,
