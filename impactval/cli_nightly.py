@@ -109,8 +109,11 @@ def _one_dt(text: str):
 def report_command(store_or_dir, run_id, out, tol, list_runs) -> None:
     """Re-render the report of a run from the store: STORE_OR_DIR is an --out directory (its
     impactval.sqlite), an SQLite file or a database URL."""
+    from impactval.checks import check_tol
     from impactval.nightly import render_stored
 
+    if tol is not None:
+        tol = check_tol(tol, "--tol")       # one line, exit 2 (it went on silently: a plate needs no tolerance)
     lines, paths = render_stored(store_or_dir, run_id, out, tol, list_runs)
     for line in lines:
         click.echo(line)

@@ -178,3 +178,14 @@ def test_nothing_comparable_names_the_differing_key_first(tmp_path):
     assert "; differing: dt: baseline 1e-06; now 5e-07. " in err[0], err[0]
     for key in ("scene:", "engine:", "integrator:", "segments:", "scene_hash:"):
         assert key not in err[0]
+
+
+def test_report_refuses_a_bad_tol_in_one_line(tmp_path):
+    """`impactval report DIR --tol 5` re-rendered silently (a rigid plate's reference needs no tolerance)."""
+    from click.testing import CliRunner
+
+    from impactval.cli import main
+
+    res = CliRunner().invoke(main, ["report", str(tmp_path), "--tol", "5"])
+    assert res.exit_code == 2 and res.output.strip().splitlines() == [
+        "impactval: error: --tol must be a relative tolerance between 1e-12 and 0.1 (e.g. 1e-6), got 5.0."]
