@@ -32,6 +32,16 @@ from impactval.jobs import Job as _RunJob
 METRICS = ("t_m", "f_m", "delta_m")
 #: local slopes of a power law over a fitted range stay within this much of the fitted order
 ORDER_SLOPE_SPREAD = 0.3
+#: an envelope (no clean range) whose local slopes stray further than this from its least-squares order has no
+#: observed order at all, and its explanation says so instead of comparing it with the nominal order. One whole
+#: order: the explanations place an order within 0.3 of the nominal one ("observed as nominal") or within 0.4 of
+#: semi-implicit Euler's 2, and tell first- from second-order methods (Euler 1; trapezoid, generalized-alpha 2) and 2
+#: from the Hertz cap near 2.5; slopes that disagree by a whole order or more cannot place the order in any of those
+#: bands. (A clean range keeps them within ORDER_SLOPE_SPREAD; between the two the envelope is reported as such, with
+#: its scatter.) Seen: a noisy order-1 series on a grid with two steps 2 % apart had slopes 2.3, -45.5, 1.0 around
+#: 0.995 and was "observed as nominal"; PyBullet's native contact on a clamped aluminium beam, f_m from 2.5e-7 to
+#: 1.6e-8 s, slopes 2.78, 2.66, -0.62 around 1.71 (its successive f_m changes change sign).
+ORDER_SLOPE_SCATTER_NONE = 1.0
 #: a clean range has at least this many points (4 differences: 3 points agree by chance too often)
 ORDER_MIN_POINTS = 5
 #: points of a fitted range lie within this factor of the fitted power law
@@ -315,6 +325,13 @@ class OrderFit:
     scatter: float = 1.0
     #: True when the points follow the law within ORDER_RESIDUAL_FACTOR (else a least-squares envelope)
     clean: bool = True
+    #: local slopes d log|x_i - x(0)| / d log dt between successive points of the range, largest dt first
+    slopes: tuple[float, ...] = ()
+
+    @property
+    def slope_spread(self) -> float:
+        """Largest |local slope - order| (0 with no slopes): within ORDER_SLOPE_SPREAD on a clean range."""
+        return max((abs(s - self.order) for s in self.slopes), default=0.0)
 
     def at(self, dt: np.ndarray) -> np.ndarray:
         return np.exp(self.log_c) * np.asarray(dt, float) ** self.order
@@ -390,7 +407,8 @@ def _window_fit(d: np.ndarray, v: np.ndarray, noise: float) -> OrderFit | None:
     resid = np.abs(np.log(e) - (logc + p * np.log(h)))
     local = np.diff(np.log(e)) / np.diff(np.log(h))
     clean = bool(np.abs(local - p).max() <= ORDER_SLOPE_SPREAD)
-    return OrderFit(p, float(d[-1]), float(d[0]), len(d), logc, float(np.exp(resid.max())), clean)
+    return OrderFit(p, float(d[-1]), float(d[0]), len(d), logc, float(np.exp(resid.max())), clean,
+                    tuple(float(x) for x in local))
 
 
 def _noise(g: pd.DataFrame, metric: str) -> float:
@@ -414,8 +432,21 @@ def _nominal(engine: str, integrator: str) -> tuple[float, str]:
 
 
 def explain_order(engine: str, integrator: str, metric: str, order: float, target_kind: str, contact: str,
-                  clean: bool = True, scatter: float = 1.0) -> str:
-    """Why the observed order of `metric` is what it is, in words."""
+                  clean: bool = True, scatter: float = 1.0, slopes: Iterable[float] = ()) -> str:
+    """Why the observed order of `metric` is what it is, in words. `slopes`: the fit's local slopes (an envelope
+    whose slopes stray more than ORDER_SLOPE_SCATTER_NONE from `order` has no observed order, and is told so)."""
+    slopes = [float(s) for s in slopes if math.isfinite(s)]
+    spread = max((abs(s - order) for s in slopes), default=0.0)
+    if math.isfinite(order) and not clean and spread > ORDER_SLOPE_SCATTER_NONE:
+        nominal, name = _nominal(engine, integrator)
+        head = f"{name}, nominal order {nominal:g}: " if math.isfinite(nominal) else f"{name}: "
+        return head + (f"no clean observed order: the local slopes between successive steps range from "
+                       f"{min(slopes):.2f} to {max(slopes):.2f}, up to {spread:.3g} away from the least-squares "
+                       f"{order:.2f} (a clean order keeps them within {ORDER_SLOPE_SPREAD:g}; beyond "
+                       f"{ORDER_SLOPE_SCATTER_NONE:g} they cannot tell one order from the next), and the points lie up "
+                       f"to {scatter:.3g}x off that law: {order:.2f} is an envelope, not an order of convergence, so "
+                       f"it is not compared with the nominal order (the points scatter, change sign or sit on a "
+                       f"floor, or two steps are too close to resolve a slope)")
     text = _explain_order(engine, integrator, metric, order, target_kind, contact)
     if math.isfinite(order) and not clean:
         text += (". Envelope: no sub-range follows one power law (see the scatter column); the error constant "
@@ -459,7 +490,8 @@ def fit_orders(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> p
     """Order of convergence in dt per scene, engine, contact, integrator, segments and metric.
 
     Columns: scene, engine, contact, integrator, segments, metric, order, dt_min, dt_max, n_points,
-    log_c, nominal_order, explanation. `order` is NaN when no dt range has a clean power law.
+    log_c, scatter, slope_spread (largest |local slope - order|), clean, nominal_order, explanation. `order` is the
+    least-squares envelope (`clean` False) when no dt range has a clean power law, NaN when not even that fits.
     `scene_kinds` maps scene name -> target kind (for the explanation).
     """
     d = with_score(df)
@@ -476,16 +508,17 @@ def fit_orders(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> p
                              metric=metric, order=order, dt_min=fit.dt_min if fit else math.nan,
                              dt_max=fit.dt_max if fit else math.nan, n_points=fit.n_points if fit else 0,
                              log_c=fit.log_c if fit else math.nan, scatter=fit.scatter if fit else math.nan,
-                             clean=bool(fit and fit.clean),
+                             slope_spread=fit.slope_spread if fit else math.nan, clean=bool(fit and fit.clean),
                              nominal_order=_nominal(engine, integrator)[0],
                              explanation=(explain_order(engine, integrator, metric, order, kind, contact,
                                                           clean=bool(fit and fit.clean),
-                                                          scatter=fit.scatter if fit else math.nan)
+                                                          scatter=fit.scatter if fit else math.nan,
+                                                          slopes=fit.slopes if fit else ())
                                           if len(g) >= 4 else
                                           f"{len(g)} stable time step{'s' if len(g) != 1 else ''} in this grid: "
                                           f"an order needs at least 4 (a clean one {ORDER_MIN_POINTS})")))
     return pd.DataFrame(rows, columns=[*SERIES, "metric", "order", "dt_min", "dt_max", "n_points", "log_c", "scatter",
-                                       "clean", "nominal_order", "explanation"])
+                                       "slope_spread", "clean", "nominal_order", "explanation"])
 
 
 # ------------------------------------------------------------ floor and stability
@@ -618,13 +651,14 @@ def orders_table(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) ->
     of their series. Columns: scene, engine, integrator, order, dt_min, dt_max, dt_limit_observed,
     dt_limit_predicted, then contact, segments, metric, nominal_order, n_points, scatter, clean,
     explanation, dt_unstable_stepped, dt_refused_min (see `stability`: dt_limit_observed counts cells refused
-    before stepping too; dt_unstable_stepped only the stepped ones)."""
+    before stepping too; dt_unstable_stepped only the stepped ones), slope_spread (largest |local slope - order|:
+    beyond ORDER_SLOPE_SCATTER_NONE an envelope is no observed order)."""
     o = fit_orders(df, scene_kinds)
     s = stability(df)
     m = o.merge(s, on=list(SERIES), how="left")
     cols = ["scene", "engine", "integrator", "order", "dt_min", "dt_max", "dt_limit_observed", "dt_limit_predicted",
             "contact", "segments", "metric", "nominal_order", "n_points", "scatter", "clean", "explanation",
-            "dt_unstable_stepped", "dt_refused_min"]
+            "dt_unstable_stepped", "dt_refused_min", "slope_spread"]
     return m[cols]
 
 

@@ -207,7 +207,9 @@ def _orders_sentence(og: pd.DataFrame, why: list[str]) -> str:
         sizes = ", ".join(_n(x) for x in dict.fromkeys(wg["segments"]))
         nominal = wg["nominal_order"].iloc[0]
         nom = f"; nominal {nominal:g}" if math.isfinite(nominal) else ""
-        env = "" if wg["clean"].all() else ", envelope"
+        spread = pd.to_numeric(wg["slope_spread"], errors="coerce") if "slope_spread" in wg else pd.Series(dtype=float)
+        env = ("" if wg["clean"].all() else
+               ", envelope, no clean order" if (spread > sw.ORDER_SLOPE_SCATTER_NONE).any() else ", envelope")
         parts.append(f"**{val}** ({mets}; N = {sizes}{nom}{env}) [{why.index(text) + 1}]")
     for text, mg in og[og["order"].isna()].groupby("explanation", sort=False):
         if text not in why:

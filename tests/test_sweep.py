@@ -106,6 +106,92 @@ def test_fit_order_without_a_power_law_is_an_envelope_or_none():
     assert sw.fit_order(dt[:3], x[:3]) is None
 
 
+def _f_m_series(dts, f_m, engine="mujoco", integrator="Euler", ref_f_m=100.0):
+    """Sweep rows of one series whose f_m [N] is given (t_m and delta_m exact, so their orders are not fitted)."""
+    return pd.DataFrame([dict(scene="s", engine=engine, contact="hertz", integrator=integrator, segments="41", dt=dt,
+                              status="ok", t_m=1.0, f_m=x, delta_m=1.0, ref_t_m=1.0, ref_f_m=ref_f_m, ref_delta_m=1.0,
+                              err_t_m=0.0, err_f_m=x / ref_f_m - 1, err_delta_m=0.0, wall_time_step_s=1e-3,
+                              n_steps=int(1e-4 / dt)) for dt, x in zip(dts, f_m)])
+
+
+def _local_slopes(dts, x, order=1.0):
+    """Independent local slopes d log e_i / d log dt_i, largest dt first, of the error estimates
+    e_i = |x_i - x_{i+1}| / (1 - (dt_{i+1}/dt_i)^order) (a constant factor on a geometric grid)."""
+    dts = np.asarray(dts, float)
+    e = np.abs(np.diff(np.asarray(x, float))) / (1 - (dts[1:] / dts[:-1]) ** order)
+    return np.diff(np.log(e)) / np.diff(np.log(dts[:-1]))
+
+
+def test_an_envelope_whose_local_slopes_scatter_widely_is_no_observed_order():
+    """A noisy first-order f_m series (MuJoCo Euler, nominal 1) on a grid with two steps 2 % apart: its least-squares
+    envelope is 0.995, but its local slopes run from -45.5 to 2.3. It was "observed as nominal"; it must say there
+    is no clean observed order and give the scatter (and the report must not print it as an order)."""
+    from impactval.reports.sweep import sweep_markdown
+
+    dts = np.array([2e-6, 1e-6, 9.8e-7, 5e-7, 2.5e-7])
+    f_m = 100.0 + 0.5 * dts / 1e-6 + np.array([0.0, 0.0, 6e-3, 0.0, 0.0])       # 6 mN off at 9.8e-7 s
+    o = sw.fit_orders(_f_m_series(dts, f_m)).set_index("metric").loc["f_m"]
+    assert not o["clean"] and abs(o["order"] - 1.0) < 0.05                     # the envelope sits on nominal 1
+    slopes = _local_slopes(dts, f_m, o["order"])
+    assert slopes.min() < -40 and abs(slopes[-1] - 1.0) < 0.1                   # the series is what it claims
+    note = o["explanation"]
+    assert "observed as nominal" not in note and "no clean observed order" in note, note
+    spread = np.abs(slopes - o["order"]).max()
+    assert f"from {slopes.min():.2f} to {slopes.max():.2f}, up to {spread:.3g} away from the least-squares" in note
+    assert o["slope_spread"] == pytest.approx(spread, rel=1e-9) and spread > 40 > sw.ORDER_SLOPE_SCATTER_NONE
+    md = sweep_markdown(_f_m_series(dts, f_m), [0.01])
+    line = next(x for x in md.splitlines() if x.startswith("- **Order in dt**"))
+    assert "envelope, no clean order" in line, line
+
+
+def test_an_envelope_with_moderate_scatter_keeps_its_comparison_with_the_nominal_order():
+    """The threshold is one whole order: an envelope whose local slopes stray 0.3-1 from it is still
+    compared with the nominal order (as an envelope; here slopes 1.69, 0.31, 1.69 around 1.14: 0.83 off); a clean
+    series is unchanged."""
+    dts = np.geomspace(2e-6, 1.25e-7, 5)
+    clean = 100.0 + 0.5 * dts / 1e-6
+    o = sw.fit_orders(_f_m_series(dts, clean)).set_index("metric").loc["f_m"]
+    assert o["clean"] and o["explanation"].endswith("observed as nominal")
+    wobble = 100.0 + np.r_[0.0, np.cumsum(0.5 * dts[:-1] / 1e-6 * np.array([1.0, 0.62, 1.0, 0.62]))]
+    o = sw.fit_orders(_f_m_series(dts, wobble)).set_index("metric").loc["f_m"]
+    spread = np.abs(_local_slopes(dts, wobble, o["order"]) - o["order"]).max()
+    assert not o["clean"] and 0.3 < spread <= 1.0, (o.to_dict(), spread)
+    assert "no clean observed order" not in o["explanation"] and "Envelope" in o["explanation"]
+    assert o["explanation"].startswith("semi-implicit (symplectic) Euler, nominal order 1: observed as nominal")
+
+
+def _al_cc_beam(where: Path):
+    """A scene outside the catalogue: a clamped-clamped aluminium beam 0.3 x 0.02 x 0.01 m hit at 0.37 L by a 5 mm
+    steel ball at 0.5 m/s."""
+    import impactval
+
+    path = where / "al_cc_037.toml"
+    path.write_text('name = "al_cc_037"\n[ball]\nradius = 0.005\nvelocity = 0.5\nmaterial = "steel"\n'
+                    '[target]\nkind = "beam"\nmaterial = "aluminium"\nsupport = "clamped-clamped"\nlength = 0.3\n'
+                    'width = 0.02\nheight = 0.01\nimpact_at = 0.37\n')
+    return impactval.load_scene(str(path))
+
+
+@requires_pybullet
+def test_a_real_noisy_series_is_no_observed_order(tmp_path):
+    """PyBullet's native contact on a clamped aluminium beam (not in the catalogue) from 2.5e-7 to 1.6e-8 s: its
+    successive f_m changes change sign (local slopes 2.78, 2.66, -0.62 here). It was explained as semi-implicit
+    Euler's 'observed order 2 because ... Verlet'; now it says there is no clean observed order."""
+    from impactval.engines.base import EngineSettings
+    from impactval.runner import execute
+
+    scene = _al_cc_beam(tmp_path)
+    jobs = sw.build_jobs([scene], ["pybullet"], EngineSettings(contact="native"),
+                         dt={"pybullet": list(np.geomspace(2.5e-7, 1.5625e-8, 5))}, tol=1e-6)
+    rows = pd.DataFrame(execute(jobs, workers=2, theory_gap=False))
+    assert (rows["status"] == "ok").all(), rows[["dt", "status", "message"]]
+    g = rows.sort_values("dt", ascending=False)
+    o = sw.fit_orders(rows).set_index("metric").loc["f_m"]
+    slopes = _local_slopes(g["dt"], g["f_m"], o["order"])
+    assert not o["clean"] and np.abs(slopes - o["order"]).max() > 1.0, (slopes, o.to_dict())   # the precondition
+    assert "no clean observed order" in o["explanation"] and "Verlet" not in o["explanation"], o["explanation"]
+
+
 # ---------------------------------------------------------------------------- front and cheapest
 def _fake_rows(n=40, seed=3):
     rng = np.random.default_rng(seed)
