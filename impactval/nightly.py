@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import signal
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -165,6 +166,105 @@ def history_rows(store, runs: pd.DataFrame, current_run: str, nights: int = HIST
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+# ---------------------------------------------------------------------------- what a report's header says
+def suite_line(suite: str, n_scenes: int, n_engines: int, night: str) -> str:
+    """The header's suite fact: 'nightly (7 scenes x 3 engines), night 3f2a...' (no scene: a stored night killed
+    before any job finished, whose scenes the store does not hold)."""
+    if not n_scenes:
+        return f"{suite} ({n_engines} engines; scenes unknown: no job finished), night {night}"
+    return f"{suite} ({n_scenes} scenes x {n_engines} engines), night {night}"
+
+
+#: stored settings that decide a job's numbers besides its time step and engine options: a run whose jobs
+#: disagree on one of them (a sweep over integrators or structure sizes) has no single settings line
+_ONE_SETTING = ("contact", "integrator", "segments", "modes", "tail")
+#: stored settings the header's settings line shows (reports.run_report.header_section; dt from the rows first)
+_SHOWN_SETTINGS = ("dt", "contact", "integrator", "segments", "timeout_s")
+
+
+def stored_settings(store, run_id: str):
+    """The EngineSettings a stored run ran with, rebuilt from the settings stored with its jobs (those it computed
+    first: a reused job keeps the timeout of the run that computed it), for its re-rendered report's header as
+    the live report had it. Engine options are left out (split per engine; the header does not show them). None
+    when no job recorded the shown settings or the jobs disagree beyond dt (a sweep's grid)."""
+    from dataclasses import fields
+
+    from impactval.engines.base import EngineSettings
+
+    recs = [r for r in store.run_settings(run_id) if all(k in r for k in _SHOWN_SETTINGS)]
+    if not recs or len({tuple(repr(r.get(k)) for k in _ONE_SETTING) for r in recs}) > 1:
+        return None
+    names = {f.name for f in fields(EngineSettings)} - {"options"}
+    try:
+        return EngineSettings(**{k: v for k, v in recs[0].items() if k in names})
+    except (ImpactvalError, TypeError):      # a record this impactval cannot read: no settings line, not a failure
+        return None
+
+
+# ---------------------------------------------------------------------------- an interrupted night
+def _planned(scene: str, engine: str, scene_hash: str, job_key: str, version: str, settings) -> dict[str, Any]:
+    """One job a night was to run, as `with_not_run` takes it (dt [s], NaN at "auto": each engine would have
+    chosen its own)."""
+    dt = getattr(settings, "dt", math.nan) if settings is not None else math.nan
+    return dict(scene=scene, engine=engine, scene_hash=scene_hash, job_key=job_key, version=version,
+                contact=getattr(settings, "contact", "") if settings is not None else "",
+                dt=float(dt) if isinstance(dt, (int, float)) else math.nan)
+
+
+def with_not_run(rows: pd.DataFrame, planned: Iterable[dict[str, Any]], message: str, run_id: str) -> pd.DataFrame:
+    """`rows` of an interrupted night (run `run_id`) in the order of `planned` (its jobs: scene, engine,
+    scene_hash, job_key, version, contact, dt), with a row of status `interrupted` (reference.result.Status.INTERRUPTED:
+    the run was stopped before this job finished), no result and `message` for each planned (scene, engine) without
+    a row: an engine that never ran is listed as such, not left out of the report."""
+    from impactval.reference.result import Status
+    from impactval.store import COLUMN_TYPES, SCHEMA_VERSION
+
+    recs = rows.to_dict("records")
+    by_pair: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in recs:
+        by_pair.setdefault((str(r["scene"]), str(r["engine"])), []).append(r)
+    out: list[dict[str, Any]] = []
+    for p in planned:
+        pair = (str(p["scene"]), str(p["engine"]))
+        if pair in by_pair:
+            out += by_pair.pop(pair)
+            continue
+        row: dict[str, Any] = {c: "" if t == "text" else math.nan for c, t in COLUMN_TYPES.items()}
+        row.update({k: p.get(k, row[k]) for k in ("scene", "engine", "scene_hash", "job_key", "version", "contact",
+                                                  "dt")},
+                   schema_version=SCHEMA_VERSION, run_id=run_id,
+                   status=str(Status.INTERRUPTED), message=message)
+        by_pair[pair] = []          # once per pair
+        out.append(row)
+    out += [r for pair_rows in by_pair.values() for r in pair_rows]      # rows of no planned job (none expected)
+    return pd.DataFrame(out, columns=list(COLUMN_TYPES))
+
+
+def _interrupted_verdict(how: str, n_done: int, n_jobs: int, never_ran: Iterable[str], fix: str) -> str:
+    """Why a night that did not finish has no verdict (the header says "none: " before it, the Verdict section
+    "No verdict: "): it is incomplete; `never_ran`: the engines none of whose jobs finished."""
+    never_ran = list(never_ran)
+    lost = f" (no job of {', '.join(never_ran)} finished)" if never_ran else ""
+    return f"the night was {how} with {n_done} of {n_jobs} jobs finished{lost}, so it is incomplete; {fix}"
+
+
+def _stored_night_rows(store, run: pd.Series, rows: pd.DataFrame) -> tuple[pd.DataFrame, int]:
+    """A stored night that did not finish (interrupted: stopped, or killed and found gone): its rows plus an
+    `interrupted` row for each engine it was to run (the run's recorded engines) that has no row for a scene of the
+    night, and the number of jobs it planned (the run's n_jobs)."""
+    info = store.run_info(str(run["id"]))
+    settings = stored_settings(store, str(run["id"]))
+    scenes = list(dict.fromkeys(rows["scene"].astype(str)))
+    hashes = dict(zip(rows["scene"].astype(str), rows["scene_hash"].astype(str)))
+    engines = list(dict.fromkeys([*rows["engine"].astype(str), *(info.get("engines") or {})]))
+    versions = {**(info.get("engines") or {}), **dict(zip(rows["engine"].astype(str), rows["version"].astype(str)))}
+    planned = [_planned(s, e, hashes[s], "", versions.get(e, ""), settings) for s in scenes for e in engines]
+    message = ("did not run: the night was interrupted (stopped, or killed and found gone) before this job finished; "
+               "rerun the night's command to resume it")
+    total = int(run["n_jobs"]) if pd.notna(run["n_jobs"]) else len(planned)
+    return with_not_run(rows, planned, message, str(run["id"])), max(total, len(planned))
+
+
 # ---------------------------------------------------------------------------- the command
 def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None = None, settings=None, *,
             suite: str = "nightly", store: Any = None, out: str | Path = "impactval-nightly",
@@ -193,7 +293,9 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
     from impactval.engines import ENGINES, engine_status
     from impactval.engines.base import EngineSettings
     from impactval.reports.build import write_report
-    from impactval.runner import References, RunInterrupted, build_jobs, execute, failed_rows, resolve_engine
+    from impactval.jobs import engine_version
+    from impactval.runner import (References, RunInterrupted, build_jobs, execute, failed_rows, resolve_engine,
+                                  scene_hash)
     from impactval.scenarios.scene import catalogue_names, load_catalogue
     from impactval.store import Store, export
 
@@ -248,9 +350,22 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
                            keep_series=True, on_row=on_row, run_id=run_id, references=solved)
         except RunInterrupted as stop:
             export(db, out)
+            how = f"interrupted by {signal.Signals(stop.signum).name}"
+            done = db.rows(run_id=stop.run_id)
+            # every job the night was to run: one that never finished is a row saying so, not a missing engine
+            planned = [_planned(j.scene.name, j.spec, scene_hash(j.scene), j.key, engine_version(j.spec), j.settings)
+                       for j in jobs]
+            never_ran = [e for e in specs if e not in set(done["engine"].astype(str))]
+            verdict = _interrupted_verdict(how, len(done), stop.total, never_ran,
+                                           "rerun the same command to resume the night")
             write_report(db, stop.run_id, out, title=f"impactval nightly ({suite}): interrupted", settings=settings,
-                         tol=tol, html=html, extra_info={"suite": suite}, scenes={s.name: s for s in scene_objs},
-                         references=solved.by_name(scene_objs, tol))
+                         rows=with_not_run(done, planned, f"did not run: the night was {how} before this job "
+                                                          f"finished; rerun the same command to resume the night",
+                                          stop.run_id),
+                         tol=tol, html=html, extra_info={"suite": suite_line(suite, len(scene_objs), len(specs), night),
+                                                         "verdict": f"none: {verdict}"},
+                         extra_md=f"\n## Verdict\n\nNo verdict: {verdict}.\n",
+                         scenes={s.name: s for s in scene_objs}, references=solved.by_name(scene_objs, tol))
             raise
         df = pd.DataFrame(rows)
         export(db, out)
@@ -306,7 +421,7 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
             baseline=None if base is None else f"run `{base['id']}` of {str(base['started_at'])[:19]}",
             checks=checks, history=hist, trend=trend, settings=settings, tol=tol, html=html,
             scenes={s.name: s for s in scene_objs}, references=solved.by_name(scene_objs, tol),
-            extra_info={"suite": f"{suite} ({len(scene_objs)} scenes x {len(specs)} engines), night {night}",
+            extra_info={"suite": suite_line(suite, len(scene_objs), len(specs), night),
                         "verdict": f"exit {code}: {message}"},
             extra_md=verdict_md)
         flagged = history.flagged_lines(cmp) if cmp is not None else []
@@ -412,12 +527,25 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
             trend = history.wall_time_steps(hist, checks["wall_time"].rel) if len(hist) else history.wall_time_steps(None)
             code = me["exit_code"]
             verdict = "" if pd.isna(code) else f"\n## Verdict\n\nExit code **{int(code)}**: {me['message']}.\n"
-            info = {"suite": f"{suite}, night {me['night']}"}
+            title, info = f"impactval nightly ({suite})", {}
             if not pd.isna(code):
                 info["verdict"] = f"exit {int(code)}: {me['message']}"
-            paths = write_report(db, run["id"], dest, title=f"impactval nightly ({suite})", rows=rows, cmp=cmp,
-                                 baseline=base_label, checks=checks, history=hist, trend=trend, tol=tol, extra_info=info,
-                                 extra_md=verdict)
+            elif str(run["status"]) == "interrupted":
+                # as the live report of an interrupted night: every engine it was to run, no verdict, incomplete
+                n_done, ran = len(rows), set(rows["engine"].astype(str))
+                rows, n_jobs = _stored_night_rows(db, run, rows)
+                never_ran = [e for e in (db.run_info(run["id"]).get("engines") or {}) if e not in ran]
+                why = _interrupted_verdict("interrupted", n_done, n_jobs, never_ran,
+                                           "rerun the night's command to resume it")
+                title += ": interrupted"
+                info["verdict"] = f"none: {why}"
+                verdict = f"\n## Verdict\n\nNo verdict: {why}.\n"
+            engines = db.run_info(run["id"]).get("engines") or {}
+            info["suite"] = suite_line(suite, rows["scene"].nunique(), len(engines) or rows["engine"].nunique(),
+                                       me["night"])
+            paths = write_report(db, run["id"], dest, title=title, rows=rows, cmp=cmp, baseline=base_label,
+                                 checks=checks, history=hist, trend=trend, tol=tol, extra_info=info, extra_md=verdict,
+                                 settings=stored_settings(db, run["id"]))
         else:
             rows = db.rows(run_id=run["id"])
             tol = tol if tol is not None else (db.run_tol(run["id"]) or 1e-6)
@@ -430,7 +558,8 @@ def render_stored(where: str, run_id: str | None = None, out: str | Path | None 
                 png = speed_accuracy_plot(rows, dest / "speed_accuracy.png")
                 if png is not None:
                     extra += f"\n![wall time vs error]({png.name})\n"
-            paths = write_report(db, run["id"], dest, rows=rows, tol=tol, extra_md=extra)
+            paths = write_report(db, run["id"], dest, rows=rows, tol=tol, extra_md=extra,
+                                 settings=stored_settings(db, run["id"]))
         return [f"run {run['id']} ({run['status']}, {str(run['started_at'])[:19]})"], list(paths)
     finally:
         db.close()

@@ -414,6 +414,26 @@ class Store:
             v = c.execute(q).scalar()
         return float(v) if v is not None else None
 
+    def run_settings(self, run_id: str) -> list[dict[str, Any]]:
+        """The distinct settings (EngineSettings.as_dict, as stored with each job) of a run's jobs: those the run
+        computed first, then those it reused (a reused job keeps the settings of the run that computed it, e.g. its
+        timeout); empty when no job of the run recorded any."""
+        sa = _sa()
+        q = (sa.select(self.jobs.c.settings, self.run_jobs.c.reused)
+             .join(self.run_jobs, self.run_jobs.c.job_key == self.jobs.c.job_key)
+             .where(self.run_jobs.c.run_id == run_id).order_by(self.run_jobs.c.position))
+        with self.engine.connect() as c:
+            recs = c.execute(q).all()
+        out: list[dict[str, Any]] = []
+        for text, _ in sorted(recs, key=lambda r: bool(r[1])):      # stable: computed first, in job order
+            try:
+                d = json.loads(text) if text else None
+            except ValueError:
+                d = None
+            if isinstance(d, dict) and d not in out:
+                out.append(d)
+        return out
+
     def rows(self, *, run_id: str | None = None, out: str | Path | None = None) -> pd.DataFrame:
         """Rows (COLUMN_TYPES columns, errors as fractions) of one run in its order, or of every run
         that wrote to the directory `out`, each job once, ordered by scene, engine and settings."""

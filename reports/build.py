@@ -88,6 +88,11 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
         if ref is not None and not ref.success:     # refused in the run (its rows are uncompared)
             notes.append(f"{name}: no reference at tol {tol:g}: {ref.message}")
             continue
+        if ref is None and (g["status"].astype(str) == "interrupted").all():
+            # no job of the scene ran (an interrupted run): solving its reference now would hold up a report written
+            # after Ctrl-C for as long as the solve takes
+            notes.append(f"{name}: no job of this scene ran (interrupted); its reference was not solved")
+            continue
         if ref is None:
             try:
                 ref = impactval.solve(scene, tol=tol)

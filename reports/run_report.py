@@ -219,11 +219,31 @@ def summary_section(df: pd.DataFrame, cmp: pd.DataFrame | None = None, trend: pd
             row.append(", ".join(f"{r['scene']} x{r['ratio']:.2f}" for _, r in t.iterrows()) or "none")
         cells.append(row)
     out += _md_table(header, cells)
+    out += _incomplete_line(df)
     out += ["", "Errors are signed relative differences (engine - reference) / reference in %; the worst error "
             "is the largest |error| of t_m, f_m, delta_m over the engine's rows. Failed: crashed, timeout, "
             "unstable, no-contact (`impactval run` exits 1; a sweep or a map, whose grids step past limits on "
             "purpose, does not); other: not-installed, skipped, interrupted (informative).", ""]
     return out
+
+
+def _incomplete_line(df: pd.DataFrame) -> list[str]:
+    """Under the summary table of a run stopped before some jobs finished (rows of status `interrupted`): that the
+    run is incomplete, and which engines lost how many jobs (an engine that never ran shows "none ran")."""
+    from impactval.reference.result import Status
+
+    stopped = df[df["status"].astype(str) == Status.INTERRUPTED.value]
+    if not len(stopped):
+        return []
+    per = []
+    for engine, g in df.groupby("engine", sort=False):
+        n_stopped = int((g["status"].astype(str) == Status.INTERRUPTED.value).sum())
+        if n_stopped:
+            per.append(f"{engine} ({'none' if n_stopped == len(g) else len(g) - n_stopped} of its {len(g)} "
+                       f"job{'s' if len(g) != 1 else ''} ran)")
+    return ["", f"**Incomplete**: {len(stopped)} of {len(df)} jobs did not run (status `interrupted`: the run was "
+                f"stopped before they finished): {', '.join(per)}. The counts and worst errors above cover only the "
+                f"jobs that ran."]
 
 
 def comparison_section(cmp: pd.DataFrame, baseline: str, checks=None, trend: pd.DataFrame | None = None) -> str:

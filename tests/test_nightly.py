@@ -5,6 +5,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -167,6 +168,88 @@ def test_report_rerenders_from_the_store_and_the_page_loads(tmp_path):
     assert "Reference values" in page["text"] and "closed form" in page["text"]
     missing = subprocess.run(cmd + ["report", str(tmp_path / "nowhere")], capture_output=True, text=True)
     assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "no such store" in missing.stderr
+
+
+def _al_beam(where) -> str:
+    """A scene outside the catalogue: a simply supported aluminium beam 0.3 x 0.02 x 0.01 m hit at 0.37 L by a 5 mm
+    steel ball at 0.5 m/s (its reference and theory gap take 0.02 s, the clamped one's 2 s). Returns the TOML path."""
+    path = where / "al_ss_037.toml"
+    path.write_text('name = "al_ss_037"\n[ball]\nradius = 0.005\nvelocity = 0.5\nmaterial = "steel"\n'
+                    '[target]\nkind = "beam"\nmaterial = "aluminium"\nsupport = "simply-supported"\nlength = 0.3\n'
+                    'width = 0.02\nheight = 0.01\nimpact_at = 0.37\n')
+    return str(path)
+
+
+def _header(md: str) -> list[str]:
+    return md[:md.index("## Summary")].splitlines()
+
+
+@requires_mujoco
+def test_a_re_rendered_night_has_the_live_header_with_its_settings_line(tmp_path):
+    """`impactval report` of a stored night printed no settings line (and a shorter suite line): the store holds
+    each job's settings, and the re-rendered header is now the live one, line for line."""
+    from impactval.nightly import nightly, render_stored
+
+    scene = _al_beam(tmp_path)
+    live = nightly([scene], "mujoco", EngineSettings(dt="auto", timeout_s=300.0), out=tmp_path / "live")
+    assert live.exit_code == 0, live.message
+    _, paths = render_stored(str(tmp_path / "live"), out=tmp_path / "again")
+    original, redone = live.report.read_text(), paths[0].read_text()
+    dt = f"{live.rows['dt'].iloc[0]:g}"
+    line = (f"- **settings**: dt = {dt} s, contact = hertz, integrator = engine default, segments = engine default, "
+            f"timeout = 300 s")
+    assert line in _header(original)
+    assert line in _header(redone)
+    assert _header(redone) == _header(original)                 # the suite line too ("nightly, night ..." before)
+
+
+def test_a_store_written_before_the_fix_re_renders_with_its_settings_line(tmp_path):
+    """Nothing was added to the store: a schema-1 store (tests/data/store_v1, main at 7e03104) has its jobs'
+    settings, and its re-rendered run report gets the settings line the live report had."""
+    import shutil
+
+    from impactval.nightly import render_stored
+
+    data = Path(__file__).parent / "data" / "store_v1"
+    shutil.copy(data / "impactval.sqlite", tmp_path / "impactval.sqlite")
+    _, paths = render_stored(str(tmp_path), out=tmp_path / "again")
+    assert ("- **settings**: dt = 1e-06 s, contact = hertz, integrator = engine default, segments = 41, "
+            "timeout = 600 s") in _header(paths[0].read_text())
+
+
+@requires_mujoco
+@requires_pybullet_installed
+def test_an_interrupted_night_lists_the_engine_that_never_ran(tmp_path):
+    """SIGINT after MuJoCo's job (-j 1: PyBullet's queued behind it): PyBullet's job never ran. The night's report
+    (live, and re-rendered from the store) lists PyBullet with status `interrupted`, says the night is incomplete
+    with no verdict, and the command exits 130 (it listed MuJoCo alone, as if PyBullet were not part of the night)."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "impactval.cli", "nightly", _al_beam(tmp_path), "--engines", "mujoco,pybullet",
+           "--dt", "auto", "-j", "1", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    end = time.monotonic() + 240
+    while _stored_jobs(out / "impactval.sqlite") < 1 and time.monotonic() < end and proc.poll() is None:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "1 of 2 jobs finished" in err, "the interrupt should land after MuJoCo's job and before PyBullet's"
+    again = subprocess.run([sys.executable, "-m", "impactval.cli", "report", str(out), "--out", str(tmp_path / "re")],
+                           capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr
+    for md in ((out / "report.md").read_text(), (tmp_path / "re" / "report.md").read_text()):
+        summary = md[md.index("## Summary"):md.index("\n## ", md.index("## Summary") + 1)]
+        assert "| pybullet | 3." in summary and "| 1 interrupted |" in summary, summary
+        assert ("**Incomplete**: 1 of 2 jobs did not run (status `interrupted`: the run was stopped before they "
+                "finished): pybullet (none of its 1 job ran)") in summary
+        results = md[md.index("## Results"):]
+        assert "| al_ss_037 | pybullet | hertz |" in results and "| interrupted |" in results
+        assert "- al_ss_037 / pybullet: **interrupted**: did not run: the night was interrupted" in md
+        assert "- **verdict**: none: the night was interrupted" in md
+        assert "1 of 2 jobs finished (no job of pybullet finished), so it is incomplete" in md
+        assert "No verdict: the night was interrupted" in md and "Exit code **0**" not in md
+        assert md.startswith("# impactval nightly (nightly): interrupted\n")
+        assert "- **suite**: nightly (1 scenes x 2 engines), night " in md and "- **settings**: dt = " in md
 
 
 @pytest.mark.slow
