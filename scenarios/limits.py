@@ -272,7 +272,9 @@ def check_scene(scene: Any, src: str) -> None:
     `load_scene` and, for Scene objects, by `check_scene_fields` (so by `impactval.solve`).
 
     The peak approach on a rigid face, delta_m = (5 m v0^2 / (4 alpha))^(2/5), must stay small against
-    the radius: Hertz theory assumes a contact radius sqrt(R delta) much smaller than R.
+    the radius: Hertz theory assumes a contact radius sqrt(R delta) much smaller than R. Two balls (target kind
+    "ball") are that ball on a rigid face with the reduced mass m1 m2 / (m1 + m2), the approach speed v1 + v2 and
+    the effective radius R1 R2 / (R1 + R2) (reference/spheres.py): delta_m is checked against that radius.
     """
     ball = scene.ball
     try:
@@ -282,16 +284,28 @@ def check_scene(scene: Any, src: str) -> None:
     if not (math.isfinite(alpha) and alpha > 0):
         raise SceneError(f"{src}: the Hertz coefficient alpha = {alpha!r} N/m^1.5 is not a positive finite number; "
                          f"check the materials' young and poisson.")
-    # log space: no overflow whatever the inputs
-    log_delta = 0.4 * (math.log(5.0 / 4.0) + math.log(ball.mass) + 2.0 * math.log(ball.velocity) - math.log(alpha))
-    ratio = math.exp(min(log_delta - math.log(ball.radius), 50.0))
-    if ratio > MAX_APPROACH_OVER_RADIUS:
-        raise SceneError(
-            f"{src}: [ball] the Hertz approach at the peak would be {ratio:.3g} x the radius (delta_m = "
-            f"{ratio * ball.radius:.3g} m for mass {ball.mass:g} kg, velocity {ball.velocity:g} m/s, radius "
-            f"{ball.radius:g} m); Hertz contact needs it below {MAX_APPROACH_OVER_RADIUS:g} x the radius: lower the "
-            f"velocity or the mass, or use a stiffer material.")
     target = scene.target
+    mass, speed, radius = ball.mass, ball.velocity, ball.radius
+    two_balls = getattr(target, "kind", "") == "ball"
+    if two_balls:           # the relative motion: a ball of the reduced mass and effective radius on a rigid face
+        mass = ball.mass * target.mass / (ball.mass + target.mass)
+        speed = ball.velocity + target.velocity
+        radius = ball.radius * target.radius / (ball.radius + target.radius)
+    # log space: no overflow whatever the inputs
+    log_delta = 0.4 * (math.log(5.0 / 4.0) + math.log(mass) + 2.0 * math.log(speed) - math.log(alpha))
+    ratio = math.exp(min(log_delta - math.log(radius), 50.0))
+    if ratio > MAX_APPROACH_OVER_RADIUS:
+        if two_balls:
+            what = (f"the effective radius R1 R2 / (R1 + R2) (delta_m = {ratio * radius:.3g} m for the reduced mass "
+                    f"{mass:g} kg, approach speed v1 + v2 = {speed:g} m/s, effective radius {radius:g} m)")
+            fix = "lower the balls' speeds or masses, or use stiffer materials"
+        else:
+            what = (f"the radius (delta_m = {ratio * radius:.3g} m for mass {mass:g} kg, velocity {speed:g} m/s, "
+                    f"radius {radius:g} m)")
+            fix = "lower the velocity or the mass, or use a stiffer material"
+        raise SceneError(
+            f"{src}: [ball] the Hertz approach at the peak would be {ratio:.3g} x {what}; Hertz contact needs it below "
+            f"{MAX_APPROACH_OVER_RADIUS:g} x {'that radius' if two_balls else 'the radius'}: {fix}.")
     if getattr(target, "kind", "") == "plate" and all(hasattr(target, k) for k in ("length", "width", "thickness")):
         r = max(target.length, target.width) / target.thickness
         if r > MAX_PLATE_SLENDERNESS:
@@ -341,8 +355,8 @@ def limits_table() -> str:
     for key, lim in LIMITS.items():
         rows.append(f"| `{key}` | {lim.describe()} | {lim.reason} |")
     rows.append(f"| `target.modes`, modal list length | 1 .. {MAX_MODES} | memory and time of the modal sums |")
-    rows.append(f"| delta_m / `ball.radius` | <= {MAX_APPROACH_OVER_RADIUS:g} | Hertz: small contact "
-                "radius against the ball radius |")
+    rows.append(f"| delta_m / `ball.radius` (two balls: / R1 R2 / (R1 + R2)) | <= {MAX_APPROACH_OVER_RADIUS:g} | "
+                "Hertz: small contact radius against the ball radius |")
     rows.append(f"| beam `length/height`, `length/width` | <= {MAX_SLENDERNESS:g} | a beam, not a string "
                 "(modes converge) |")
     rows.append(f"| plate larger side / `thickness` | <= {MAX_PLATE_SLENDERNESS:g} | a plate, not a foil "

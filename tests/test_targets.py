@@ -93,6 +93,33 @@ def test_ball_target_bad_input():
         scene_from_dict(base)
 
 
+def test_two_balls_are_checked_with_the_reduced_mass_closing_speed_and_effective_radius():
+    """Two free balls are a ball of the reduced mass, at the closing speed and of the effective radius on a rigid face
+    (reference/spheres.py): the load-time Hertz check uses those. It used the first ball alone: a 10 mm steel ball at
+    20 m/s on a free 1 mm PMMA ball was refused with delta_m = 1.68 mm (0.168 x R: the 10 mm ball on a rigid PMMA
+    plate) where its approach is 49.8 um (0.055 x R_eff); and two balls closing at 30 + 30 m/s (0.177 x R_eff) were
+    accepted. Checked against the closed form of the relative motion (m* delta'' = -alpha delta^1.5)."""
+    from impactval.reference.spheres import two_sphere_impact
+
+    small = {"ball": {"radius": 0.01, "velocity": 20.0, "material": "steel"},
+             "target": {"kind": "ball", "radius": 0.001, "material": "pmma"}}
+    sc = scene_from_dict(small)                                   # accepted
+    closed = two_sphere_impact(sc)
+    r_eff = 0.01 * 0.001 / 0.011
+    assert 0.05 < closed.delta_m / r_eff < 0.1
+    assert impactval.solve(sc, tol=1e-6).delta_m == pytest.approx(closed.delta_m, rel=1e-6)
+    both = {"ball": {"radius": 0.0078, "velocity": 30.0, "material": "glass"},
+            "target": {"kind": "ball", "radius": 0.0075, "material": "aluminium", "velocity": 30.0}}
+    probe = scene_from_dict({**both, "target": {**both["target"], "velocity": 0.0}})     # masses and alpha
+    speed = probe.ball.velocity + 30.0
+    m_star = probe.ball.mass * probe.target.mass / (probe.ball.mass + probe.target.mass)
+    delta = (5 * m_star * speed**2 / (4 * probe.alpha)) ** 0.4           # the closed-form peak approach
+    r_eff = 0.0078 * 0.0075 / (0.0078 + 0.0075)
+    assert 0.1 < delta / r_eff < 0.2
+    with pytest.raises(SceneError, match=r"0\.1\d+ x the effective radius .* approach speed v1 \+ v2 = 60 m/s"):
+        impactval.solve(scene_from_dict(both))          # the cross-field checks run on load_scene and solve
+
+
 # ----------------------------------------------------------------------------- Timoshenko beams
 
 def _beam(length, support="simply-supported", h=0.01, at=0.4, theory="timoshenko"):
