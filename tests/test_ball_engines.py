@@ -128,3 +128,27 @@ def test_fake_adapter_runs_two_balls_in_closed_form():
         assert rel(got, want) <= 1e-4
     u1, _ = two_sphere_velocities_after(sc)
     assert rel(-r.rebound_velocity, u1) <= 1e-9
+
+
+@requires_mujoco
+def test_a_step_that_under_resolves_the_contact_says_so_and_what_step_to_take():
+    """A user's glass ball (2.55 mm, 9.21 m/s) on a free 46.7 mm PMMA ball at dt = 1e-5 s, below MuJoCo's predicted
+    limit: the 29.5 us contact (closed form of the relative motion) takes 3 steps, the energy grows 12.7 % and the row
+    said "unstable ... (predicted limit 1.46e-05 s)" and nothing else, as if the step were safe. It now names the
+    steps per contact and a step to take; that step (the automatic one) gives an ok row within the plate bar."""
+    from impactval.scenarios.scene import scene_from_dict
+
+    sc = scene_from_dict({"name": "glass_on_pmma_ball", "ball": {"radius": 0.0025512, "velocity": 9.212,
+                                                                "material": "glass"},
+                          "target": {"kind": "ball", "radius": 0.046747, "material": "pmma"}})
+    closed = two_sphere_impact(sc)
+    r = load_adapter("mujoco").run(sc, EngineSettings(dt=1e-5))
+    assert r.status == "unstable" and r.dt <= r.dt_limit, r.message
+    steps = closed.t_m / 1e-5
+    assert f"the contact (~{closed.t_m:.3g} s) spans only {steps:.2g} steps" in r.message, r.message
+    suggest = float(r.message.split("use dt <= ")[1].split(" s")[0])
+    assert suggest <= closed.t_m / 100
+    again = load_adapter("mujoco").run(sc, EngineSettings(dt=suggest))
+    assert again.status == "ok", again.message
+    for got, want in ((again.t_m, closed.t_m), (again.f_m, closed.f_m), (again.delta_m, closed.delta_m)):
+        assert rel(got, want) <= BAR, (got, want)
