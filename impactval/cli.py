@@ -201,28 +201,12 @@ def _explain(sc, tol: float) -> None:
         click.echo(f"  {j + 1:6d} {c.omega[j]:14.6g} {c.w[j]:9.4g} {c.s[j]:9.4g} {c.d_t[j]:+11.3e} {c.d_f[j]:+13.3e}")
 
 
-#: above this beam-theory gap (relative, any metric) an Euler-Bernoulli scene's explanation recommends Timoshenko
-THEORY_NOTE = 0.01
-
-
 def _explain_theory(sc) -> None:
-    """How much the beam theory alone moves the answer: the reference with the other theory (the run report's
-    theory gap, `runner.theory_gap`), and a recommendation when an Euler-Bernoulli beam is off Timoshenko's by more than
-    THEORY_NOTE (shear and rotary inertia: short beams, and slender ones whose contact excites high modes)."""
-    import impactval
-    from impactval.runner import THEORY_GAP_TOL, theory_gap
+    """How much the beam theory alone moves the answer, and whether to use Timoshenko (`reports.theory`, shared with
+    the theory page)."""
+    from impactval.reports.theory import beam_theory_line
 
-    ref = impactval.solve(sc, tol=THEORY_GAP_TOL)      # both theories at 1e-5 whatever --tol: the gap is shown to 0.01 %
-    g = theory_gap(sc, ref, THEORY_GAP_TOL)
-    if not all(math.isfinite(v) for v in g.gap.values()):
-        click.echo(f"  beam theory: the reference with theory = \"{g.other}\" did not solve; no theory gap")
-        return
-    line = (f"  beam theory: with theory = \"{g.other}\" the reference moves by t_m {100 * g.gap['t_m']:+.2f} %, "
-            f"f_m {100 * g.gap['f_m']:+.2f} %, delta_m {100 * g.gap['delta_m']:+.2f} %")
-    if g.other == "timoshenko" and max(abs(v) for v in g.gap.values()) > THEORY_NOTE:
-        line += (f" (above {100 * THEORY_NOTE:g} %: shear and rotary inertia matter here; a real beam of these "
-                 "proportions behaves like Timoshenko's, set theory = \"timoshenko\" in the scene)")
-    click.echo(line)
+    click.echo(f"  {beam_theory_line(sc)}")
 
 
 def _reference_theory(scenes_, model: str, tol: float, window: float, as_json: bool, curve: str | None,

@@ -177,17 +177,23 @@ def materials(scene) -> None:
     from impactval.scenarios.materials import BUILTIN_MATERIALS
 
     mats = dict(BUILTIN_MATERIALS)
+    used: dict[str, list[str]] = {}         # material name -> the scene's parts made of it ("ball", "target")
     if scene:
         import impactval
 
         sc = impactval.load_scene(scene)
-        for m in (sc.ball.material, sc.target.material):
+        for part, m in (("ball", sc.ball.material), ("target", sc.target.material)):
             mats[m.name] = m
+            used.setdefault(m.name, []).append(part)
+        click.echo(f"this scene ({sc.name}): ball {sc.ball.material.name}, target {sc.target.material.name} "
+                   f"({sc.target.kind}); marked <- below")
     click.echo(f"{'material':<18} {'E [GPa]':>9} {'nu':>6} {'rho [kg/m^3]':>13} {'yield [MPa]':>12}  source")
     for m in mats.values():
         y = getattr(m, "yield_stress", None)
         y_s = f"{y / 1e6:12.4g}" if y else f"{'-':>12}"
-        click.echo(f"{m.name:<18} {m.young / 1e9:9.4g} {m.poisson:6.3g} {m.density:13.6g} {y_s}  {m.source or 'not given'}")
+        mark = f"  <- {', '.join(used[m.name])}" if m.name in used else ""
+        click.echo(f"{m.name:<18} {m.young / 1e9:9.4g} {m.poisson:6.3g} {m.density:13.6g} {y_s}  "
+                   f"{m.source or 'not given'}{mark}")
 
 
 def register(group: click.Group) -> None:

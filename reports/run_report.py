@@ -356,13 +356,18 @@ def header_section(info: Mapping[str, Any] | None, settings=None, df: pd.DataFra
             v = ", ".join(f"{k} {x}" for k, x in v.items())
         out.append(f"- **{label}**: {v}")
     if settings is not None:
-        steps = _dt(settings.dt)
-        if df is not None and len(df):
-            steps = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
-                                                        reverse=True)) or steps
-        out.append(f"- **settings**: dt = {steps} s, contact = {settings.contact}, integrator = "
+        asked = _dt(settings.dt)
+        auto = not math.isfinite(_num(settings.dt))      # "auto": each engine chose its own step
+        used = ""
+        if df is not None and len(df) and "dt" in df:
+            used = ", ".join(f"{x:g}" for x in sorted(set(pd.to_numeric(df["dt"], errors="coerce").dropna()),
+                                                       reverse=True))
+        # the steps the rows carry first, then (at --dt auto) that the engines chose them, not the user
+        steps = (f"{used} s" if used else f"{asked} (no row stepped)" if auto else f"{asked} s")
+        chosen = f" (--dt {asked}: the engines chose these steps)" if auto and used else ""
+        out.append(f"- **settings**: dt = {steps}, contact = {settings.contact}, integrator = "
                    f"{settings.integrator or 'engine default'}, segments = {settings.segments or 'engine default'}, "
-                   f"timeout = {settings.timeout_s:g} s")
+                   f"timeout = {settings.timeout_s:g} s{chosen}")
     return out + [""] if len(out) > 2 else out
 
 

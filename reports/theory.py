@@ -32,7 +32,8 @@ class TheoryComparison:
     """All models of one scene: `table` (DataFrame, one row per model, SI units and relative differences
     to the nonlinear reference), the linear contact's `model_form_error` (relative, linear - Hertz), the
     first-order `s_total` (sum of s_j), the mode choice, the force curves per model (t [s], f [N]) and the exact
-    solutions' own warnings (`warnings`: (model, text) pairs: Hertz assumptions, an uncertainty above tol, ...)."""
+    solutions' own warnings (`warnings`: (model, text) pairs: Hertz assumptions, an uncertainty above tol, ...) and,
+    on a beam, the beam-theory gap sentence (`beam_theory`, the one `reference --explain` prints; "" otherwise)."""
 
     scene: str
     table: object
@@ -43,6 +44,7 @@ class TheoryComparison:
     k0: float
     tol: float
     warnings: tuple = ()
+    beam_theory: str = ""
 
 
 def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> TheoryComparison:
@@ -57,6 +59,7 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
 
     from impactval.reference.structure import contact_scene
 
+    beam_theory = beam_theory_line(scene) if scene.target.kind == "beam" else ""
     scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     ball = scene.ball
     plate = plate_impact(ball.mass, scene.alpha, ball.velocity)
@@ -89,7 +92,32 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
     table = pd.DataFrame(rows)
     warnings = tuple(("nonlinear", w) for w in ref.validity) + tuple(("linear", w) for w in lin.validity)
     return TheoryComparison(scene.name, table, lin.metrics.relative_to(ref.metrics), s_total,
-                            required_modes(scene, choice_tol), curves, plate.k0, tol, warnings)
+                            required_modes(scene, choice_tol), curves, plate.k0, tol, warnings, beam_theory)
+
+
+#: above this beam-theory gap (relative, any metric) an Euler-Bernoulli scene's explanation recommends Timoshenko
+THEORY_NOTE = 0.01
+
+
+def beam_theory_line(scene) -> str:
+    """How much the beam theory alone moves a beam scene's answer, as one sentence (`reference --explain` and the
+    theory page): the reference with the other theory (the run report's theory gap, `runner.theory_gap`, both
+    theories solved at THEORY_GAP_TOL whatever the page's tol: the gap is shown to 0.01 %), and a recommendation when
+    an Euler-Bernoulli beam is off Timoshenko's by more than THEORY_NOTE (shear and rotary inertia: short beams, and
+    slender ones whose contact excites high modes)."""
+    import impactval
+    from impactval.runner import THEORY_GAP_TOL, theory_gap
+
+    ref = impactval.solve(scene, tol=THEORY_GAP_TOL)
+    g = theory_gap(scene, ref, THEORY_GAP_TOL)
+    if not all(math.isfinite(v) for v in g.gap.values()):
+        return f"beam theory: the reference with theory = \"{g.other}\" did not solve; no theory gap"
+    line = (f"beam theory: with theory = \"{g.other}\" the reference moves by t_m {100 * g.gap['t_m']:+.2f} %, "
+            f"f_m {100 * g.gap['f_m']:+.2f} %, delta_m {100 * g.gap['delta_m']:+.2f} %")
+    if g.other == "timoshenko" and max(abs(v) for v in g.gap.values()) > THEORY_NOTE:
+        line += (f" (above {100 * THEORY_NOTE:g} %: shear and rotary inertia matter here; a real beam of these "
+                 "proportions behaves like Timoshenko's, set theory = \"timoshenko\" in the scene)")
+    return line
 
 
 def _pct(x: float) -> str:
@@ -147,6 +175,8 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
     lines.append("")
     if cmp.warnings:
         lines += ["Warnings of the exact solutions:", ""] + [f"- {model}: {text}" for model, text in cmp.warnings] + [""]
+    if cmp.beam_theory:
+        lines += ["## Beam theory", "", cmp.beam_theory[0].upper() + cmp.beam_theory[1:] + ".", ""]
     if plot_name:
         lines += [f"![contact force by model]({plot_name})", "",
                   "The perturbation curves are d0 + d1 over the zero-order contact; their peaks differ from the "
