@@ -60,6 +60,7 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
     from impactval.reference.structure import contact_scene
 
     beam_theory = beam_theory_line(scene) if scene.target.kind == "beam" else ""
+    two_balls = scene.target.kind == "ball"
     scene = contact_scene(scene)          # a second ball: the equivalent ball on a rigid plate
     ball = scene.ball
     plate = plate_impact(ball.mass, scene.alpha, ball.velocity)
@@ -81,6 +82,13 @@ def compare_models(scene, tol: float = 1e-6, choice_tol: float = 1e-3) -> Theory
     tp = np.linspace(0.0, plate.t_m, 400)
     curves["plate"] = (tp, plate.force(tp))
     labels = dict(MODELS)
+    if scene.target.kind == "rigid-plate":      # no elastic structure: the exact solutions are the rigid face's
+        face = "two balls' relative motion" if two_balls else "rigid plate"
+        labels["nonlinear"] = f"Hertz contact, {face} (reference, exact)"
+        labels["linear"] = f"linear contact k0, {face} (exact)"
+        if two_balls:
+            labels["plate"] = "Hertz contact, reduced mass on a rigid face (closed form)"
+            labels["plate-linear"] = "linear contact, reduced mass on a rigid face (closed form)"
     rows = []
     for key, _ in MODELS:
         if key not in metrics:
@@ -178,10 +186,11 @@ def theory_markdown(cmp: TheoryComparison, plot_name: str | None = None) -> str:
     if cmp.beam_theory:
         lines += ["## Beam theory", "", cmp.beam_theory[0].upper() + cmp.beam_theory[1:] + ".", ""]
     if plot_name:
-        lines += [f"![contact force by model]({plot_name})", "",
-                  "The perturbation curves are d0 + d1 over the zero-order contact; their peaks differ from the "
-                  "first-order metrics (evaluated at the zero-order peak) by terms of second order, which are "
-                  "visible when the structure's effect is large.", ""]
+        lines += [f"![contact force by model]({plot_name})", ""]
+        if "perturbation" in set(t["model"]):
+            lines += ["The perturbation curves are d0 + d1 over the zero-order contact; their peaks differ from the "
+                      "first-order metrics (evaluated at the zero-order peak) by terms of second order, which are "
+                      "visible when the structure's effect is large.", ""]
     c = cmp.choice
     if len(c.s):
         se = c.structure_effect

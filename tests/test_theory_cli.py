@@ -174,3 +174,17 @@ def test_theory_page_of_a_beam_gives_the_beam_theory_gap_and_the_recommendation(
     # not on a scene without a beam
     plate, _ = theory_page(impactval.load_scene("plate_steel"), tmp_path / "plate", plot=False)
     assert "Beam theory" not in plate.read_text()
+
+
+@pytest.mark.parametrize("name, face", [("ball_ball_glass_dem", "two balls' relative motion"),
+                                        ("plate_steel", "rigid plate")])
+def test_a_page_without_an_elastic_structure_does_not_claim_one(tmp_path, name, face):
+    """Two balls and a rigid plate have no elastic structure and no perturbation rows: their pages said "Hertz contact,
+    elastic structure (reference, exact)" and explained perturbation curves that are not drawn."""
+    page, cmp = theory_page(impactval.load_scene(name), tmp_path, tol=1e-6, plot=True)
+    text = page.read_text()
+    assert "elastic structure" not in text and "perturbation curves" not in text
+    assert f"| Hertz contact, {face} (reference, exact) |" in text
+    assert "perturbation" not in set(cmp.table["model"])
+    modal, _ = theory_page(impactval.load_scene("modal_two_mode"), tmp_path, tol=1e-6, plot=True)
+    assert "elastic structure (reference, exact)" in modal.read_text() and "perturbation curves" in modal.read_text()
