@@ -108,6 +108,12 @@ MESSAGES: dict[str, tuple[Status, str]] = {
 }
 
 
+#: the words of MESSAGES["dt-limit"] that tell a step refused before stepping (status "unstable", 0 steps) from a
+#: stepped blow-up: the sweep's counts and the progress lines read them
+REFUSED_MARKER = "refused before stepping"
+assert REFUSED_MARKER in MESSAGES["dt-limit"][1]
+
+
 def message(reason: str, **kw: Any) -> tuple[Status, str]:
     """(status, text) of a failure reason from the one table."""
     status, text = MESSAGES[reason]

@@ -131,6 +131,11 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
         click.echo(f"impactval: interrupted while writing the report; every cell is stored: rerun the same command "
                    f"to write {Path(out) / 'sweep.md'}", err=True)
         sys.exit(130)
+    from impactval.reports.sweep import cell_counts
+
+    # how the cells ended, refused-before-stepping apart from stepped-and-unstable (the per-cell progress lines
+    # above show both as "unstable")
+    click.echo(f"impactval sweep: {cell_counts(df)}", err=True)
     cheap = sw.cheapest(df, unders)
     for _, c in cheap.iterrows():
         if c["found"]:

@@ -64,7 +64,7 @@ class PlainProgress:
 
             status = Status(row["status"])
             self.failed += status.failed
-            self._line(f"[{self.done_n}/{self.total}] {label}: {status} ({seconds:.2f} s)")
+            self._line(f"[{self.done_n}/{self.total}] {label}: {_status_text(status, row)} ({seconds:.2f} s)")
 
     def note(self, text: str) -> None:
         self._line(text)
@@ -162,3 +162,13 @@ def make_progress(kind: str | None = "auto", stream: TextIO | None = None):
         except ImportError:
             return PlainProgress(stream)
     return PlainProgress(stream)
+
+
+def _status_text(status, row: dict[str, Any]) -> str:
+    """A finished job's status for its progress line: "unstable (refused before stepping)" for a step refused above
+    the predicted stability limit (never stepped, so nothing blew up), else the status."""
+    from impactval.engines.base import REFUSED_MARKER
+
+    if str(status) == "unstable" and REFUSED_MARKER in str(row.get("message", "") or ""):
+        return f"{status} (refused before stepping: dt above the predicted limit)"
+    return str(status)

@@ -25,6 +25,9 @@ import numpy as np
 import pandas as pd
 
 from impactval import ranges as _ranges
+# REFUSED_MARKER: what the adapter base's message says of a cell whose dt is above the predicted explicit stability
+# limit: refused before stepping (status "unstable", 0 steps), so it tells nothing about where the engine goes unstable
+from impactval.engines.base import REFUSED_MARKER
 from impactval.errors import ImpactvalError
 from impactval.jobs import Job as _RunJob
 
@@ -598,10 +601,6 @@ def _floor_cause(d: pd.DataFrame, g: pd.DataFrame, fine: pd.Series, floor: float
     return "; ".join(causes) or "not identified"
 
 
-#: what the adapter base's message says of a cell whose dt is above the predicted explicit stability limit: it
-#: is refused before stepping (status "unstable", 0 steps; engines.base MESSAGES["dt-limit"]), so it tells nothing
-#: about where the engine really goes unstable
-REFUSED_MARKER = "refused before stepping"
 
 
 def refused_before_stepping(df: pd.DataFrame) -> pd.Series:
@@ -609,6 +608,19 @@ def refused_before_stepping(df: pd.DataFrame) -> pd.Series:
     and the adapter base's refusal in the message."""
     msg = df["message"].fillna("").astype(str) if "message" in df else pd.Series("", index=df.index)
     return (df["status"].astype(str) == "unstable") & msg.str.contains(REFUSED_MARKER, regex=False)
+
+
+def status_counts(df: pd.DataFrame) -> dict[str, int]:
+    """How many cells ended how, each cell counted once: `cells`, `ok`, `refused` (dt above the predicted limit,
+    refused before stepping: never stepped, so no blow-up was observed), `unstable_stepped` (stepped and went
+    unstable), `failed` (any other failing status: crashed, timeout, no-contact, ...), `skipped` (skipped or
+    engine not installed)."""
+    st = df["status"].astype(str)
+    refused = refused_before_stepping(df)
+    skipped = st.isin(["skipped", "not-installed"])
+    return dict(cells=len(df), ok=int((st == "ok").sum()), refused=int(refused.sum()),
+                unstable_stepped=int(((st == "unstable") & ~refused).sum()),
+                failed=int((~st.isin(["ok", "unstable"]) & ~skipped).sum()), skipped=int(skipped.sum()))
 
 
 def stability(df: pd.DataFrame) -> pd.DataFrame:

@@ -69,6 +69,16 @@ _FLOOR_WORDS = {
     "float precision": "float precision (roundoff)",
     "contact law": "contact law: the native contact is a linear spring, the reference is Hertz",
 }
+def cell_counts(df: pd.DataFrame) -> str:
+    """How the cells ended, in words (sweep.md's first line and the sweep's last line on stderr): cells refused
+    before stepping (dt above the predicted limit, never stepped) are counted apart from cells that were stepped
+    and went unstable, since only the latter observed a blow-up."""
+    n = sw.status_counts(df)
+    return (f"{n['cells']} cells: {n['ok']} ok, {n['refused']} refused before stepping (dt above the predicted "
+            f"stability limit), {n['unstable_stepped']} unstable when stepped, {n['failed']} failed otherwise, "
+            f"{n['skipped']} skipped")
+
+
 def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str, str] | None = None,
                    plots: list[Path] | None = None, tol: float | None = None) -> str:
     """The sweep report: per scene and engine what a person reads in a minute (cheapest setting under
@@ -78,12 +88,9 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
     floors = sw.floors(df, scene_kinds)
     stab = sw.stability(df)
     cheap = sw.cheapest(df, unders)
-    st = d["status"].astype(str)
     why: list[str] = []          # explanations of the orders, numbered once for the whole report
     out = ["# impactval sweep", "",
-           f"{len(d)} cells: {int((st == 'ok').sum())} ok, {int((st == 'unstable').sum())} unstable, "
-           f"{int((~st.isin(['ok', 'unstable', 'skipped', 'not-installed'])).sum())} failed otherwise, "
-           f"{int(st.isin(['skipped', 'not-installed']).sum())} skipped. "
+           f"{cell_counts(d)}. "
            f"Error = largest |relative error| of t_m, f_m, delta_m against the reference"
            f"{f' (tol {tol:g})' if tol else ''}; cost = stepping wall time (build excluded) as steps x the median "
            f"time per step of the same engine, integrator and N in this sweep (one cell's timing is noisy on a "
@@ -349,16 +356,16 @@ def _log_axes(ax, xlabel: str, ylabel: str) -> None:
 
 
 def _no_error_panel(ax, xs: pd.Series, x_default: tuple[float, float]) -> None:
-    """A log-log panel where no cell has an error (every cell failed or was unstable): matplotlib cannot pick log
-    limits without positive data, so the panel gets a decade of x around the cells' finite positive x values (else
-    `x_default`), 1e-3 .. 1e2 % in y, and says why it holds no points."""
+    """A log-log panel where no cell has an error (every cell failed, was unstable or was refused): matplotlib
+    cannot pick log limits without positive data, so the panel gets a decade of x around the cells' finite positive
+    x values (else `x_default`), 1e-3 .. 1e2 % in y, and says why it holds no points."""
     x = pd.to_numeric(xs, errors="coerce")
     x = x[(x > 0) & np.isfinite(x)]
     lo, hi = (float(x.min()) / 3.0, float(x.max()) * 3.0) if len(x) else x_default
     ax.set_xlim(lo, hi)
     ax.set_ylim(1e-3, 1e2)
-    ax.text(0.5, 0.5, "no cell gave an error\n(all failed or unstable: x marks above)", transform=ax.transAxes,
-            ha="center", va="center", fontsize=9, color="0.35")
+    ax.text(0.5, 0.5, "no cell gave an error\n(all failed, unstable or refused before stepping: marks above)",
+            transform=ax.transAxes, ha="center", va="center", fontsize=9, color="0.35")
 
 
 def _styles(d: pd.DataFrame):
@@ -381,27 +388,41 @@ def _save(fig, stem: Path) -> list[Path]:
     return paths
 
 
+#: legend labels of the cells without an error along the top of a panel: stepped and went unstable (or failed
+#: otherwise), and refused before stepping (dt above the predicted limit: never stepped, no blow-up observed)
+FAILED_LABEL = "unstable when stepped / failed (no error)"
+REFUSED_LABEL = "refused before stepping (dt above the predicted limit; no error)"
+
+
 def _failed_band(ax, failed: pd.DataFrame, xcol: str, colours, label_done: set) -> None:
-    """Failed/unstable cells as x markers on a band at the top of the axes (they have no error)."""
+    """Cells without an error on a band at the top of the axes: stepped-and-unstable or otherwise failed cells
+    as x markers, cells refused before stepping (`impactval.sweep.refused_before_stepping`) as hollow
+    triangles pointing right (towards larger dt, where the refusals are) just below them, each kind with its
+    own legend entry."""
     import matplotlib.transforms as mtransforms
 
     trans = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
-    for _, r in failed.iterrows():
+    refused = sw.refused_before_stepping(failed) if len(failed) else pd.Series(False, index=failed.index)
+    for i, r in failed.iterrows():
         x = r[xcol]
-        lab = "unstable / failed (no error)" if "failed" not in label_done else None
-        label_done.add("failed")
+        kind = "refused" if bool(refused.loc[i]) else "failed"
+        lab = None if kind in label_done else (REFUSED_LABEL if kind == "refused" else FAILED_LABEL)
+        label_done.add(kind)
+        style = (dict(marker=">", mfc="none", ms=7, mew=1.5) if kind == "refused" else dict(marker="x", ms=8, mew=2))
+        y = 0.91 if kind == "refused" else 0.97
         if isinstance(x, (int, float)) and math.isfinite(x) and x > 0:
-            ax.plot([x], [0.97], marker="x", color=colours(r["engine"]), ms=8, mew=2, transform=trans,
-                    clip_on=False, linestyle="none", label=lab)
-        else:               # no time measured (failed at build or first step): at the left edge
-            ax.plot([0.02], [0.97], marker="x", color=colours(r["engine"]), ms=8, mew=2, transform=ax.transAxes,
-                    clip_on=False, linestyle="none", label=lab)
+            ax.plot([x], [y], color=colours(r["engine"]), transform=trans, clip_on=False, linestyle="none",
+                    label=lab, **style)
+        else:               # no time measured (refused, or failed at build or first step): at the left edge
+            ax.plot([0.02], [y], color=colours(r["engine"]), transform=ax.transAxes, clip_on=False,
+                    linestyle="none", label=lab, **style)
 
 
 def plot_error_vs_time(df: pd.DataFrame, unders: list[float], stem: str | Path) -> list[Path]:
     """Largest error [%] against stepping time [s], one panel per scene, colour = engine, marker =
     integrator; the Pareto front as a step line, the --under tolerances as dashed lines, failed
-    and unstable cells as x marks along the top. Returns the PNG and SVG paths ([] without matplotlib)."""
+    and unstable cells as x marks along the top, cells refused before stepping as hollow triangles below them.
+    Returns the PNG and SVG paths ([] without matplotlib)."""
     plt = _pyplot()
     if plt is None:
         return []
@@ -446,7 +467,8 @@ def plot_error_vs_dt(df: pd.DataFrame, unders: list[float], stem: str | Path,
     """Per scene and engine: largest error [%] against dt (solid/dashed per segment count, marker
     per integrator), the dt-error estimate of the metric with the cleanest fitted order with its
     fitted power law (thin, slope written in the legend), --under lines, and failed/unstable cells
-    as x marks along the top. Returns the PNG and SVG paths."""
+    as x marks along the top, cells refused before stepping as hollow triangles below them. Returns the PNG and SVG
+    paths."""
     plt = _pyplot()
     if plt is None:
         return []

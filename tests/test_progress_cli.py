@@ -26,6 +26,23 @@ def test_plain_progress_is_one_line_per_job():
     assert p.failed == 1
 
 
+def test_a_step_refused_before_stepping_is_not_a_blow_up_in_the_progress_line():
+    """A sweep cell above the predicted limit is refused before stepping (status unstable, 0 steps): its progress line
+    said "unstable" like a stepped blow-up. The message is the adapter base's own (engines.base MESSAGES)."""
+    from impactval.engines.base import message
+
+    _, refused = message("dt-limit", dt=1e-5, limit=2e-6, what="chain, 41 links", suggest=1e-6)
+    _, blown = message("energy", growth="by 12.7%", allowed=0.05, dt=1e-5, limit="1.46e-05 s")
+    buf = io.StringIO()
+    p = make_progress("auto", buf)
+    p.start(2, 0)
+    p.done("beam / mujoco dt=1e-05", {"status": "unstable", "message": refused}, 0.01)
+    p.done("balls / mujoco dt=1e-05", {"status": "unstable", "message": blown}, 0.02)
+    assert buf.getvalue().splitlines() == [
+        "[1/2] beam / mujoco dt=1e-05: unstable (refused before stepping: dt above the predicted limit) (0.01 s)",
+        "[2/2] balls / mujoco dt=1e-05: unstable (0.02 s)"]
+
+
 def test_rich_progress_shows_counts_failures_eta_and_running_jobs():
     pytest.importorskip("rich")
     from rich.console import Console

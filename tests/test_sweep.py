@@ -713,6 +713,43 @@ def test_sweep_says_each_reference_solve_with_scene_tol_and_time(plate_scene):
 
 
 @requires_mujoco
+def test_cells_refused_before_stepping_are_counted_and_drawn_apart_from_stepped_unstable_ones(monkeypatch):
+    """fz2902 (s19 fuzz finding 5): 14 of 24 cells refused before stepping (dt above the predicted limit, 0 steps)
+    were counted as "14 unstable" in sweep.md's first line and drawn as "x unstable / failed" in error_vs_dt.png,
+    as if they had blown up. Here 2 refused cells and 1 stepped cell that went unstable: each counted and drawn
+    as what it is."""
+    from impactval.reports import sweep as rs
+
+    rows = _stab_rows()
+    assert sw.status_counts(rows) == dict(cells=5, ok=2, refused=2, unstable_stepped=1, failed=0, skipped=0)
+    md = rs.sweep_markdown(rows, [0.01], {"s": "beam"})
+    head = md.splitlines()[2]
+    assert head.startswith("5 cells: 2 ok, 2 refused before stepping (dt above the predicted stability limit), "
+                           "1 unstable when stepped, 0 failed otherwise, 0 skipped."), head
+    drawn = []                  # (label, marker, y in axes fraction) of each legend entry, per panel
+
+    def keep(fig, stem):
+        for ax in fig.axes:
+            if ax.get_visible():
+                drawn.append({ln.get_label(): (ln.get_marker(), ln.get_ydata()[0]) for ln in ax.get_lines()
+                              if not ln.get_label().startswith("_")})
+        return []
+
+    monkeypatch.setattr(rs, "_save", keep)
+    rs.plot_error_vs_dt(rows, [0.01], "unused", {"s": "beam"})
+    rs.plot_error_vs_time(rows, [0.01], "unused")
+    assert len(drawn) == 2
+    for legend in drawn:
+        assert legend[rs.REFUSED_LABEL][0] == ">" and legend[rs.FAILED_LABEL][0] == "x", legend
+        assert legend[rs.REFUSED_LABEL][1] != legend[rs.FAILED_LABEL][1], legend
+        assert not any("unstable / failed" in lab and lab != rs.FAILED_LABEL for lab in legend), legend
+    # the refused cells alone: no "unstable" entry at all
+    only_refused = rows[sw.refused_before_stepping(rows) | (rows["status"] == "ok")]
+    drawn.clear()
+    rs.plot_error_vs_dt(only_refused, [0.01], "unused", {"s": "beam"})
+    assert rs.REFUSED_LABEL in drawn[0] and rs.FAILED_LABEL not in drawn[0], drawn
+
+
 def test_sweep_command_on_a_chain_refused_above_its_limit(tmp_path):
     """The whole command on the worked beam, N = 81 (predicted limit ~7.35e-7 s): dt = 1e-6 is refused before
     stepping, so sweep.md says so instead of "the prediction brackets it"; stderr says the reference solve;
@@ -725,6 +762,8 @@ def test_sweep_command_on_a_chain_refused_above_its_limit(tmp_path):
     assert "reference beam_ss_midspan (tol 1e-09): solving ..." in err, err
     solving = err.index("reference beam_ss_midspan (tol 1e-09): solving ...")
     assert err[solving + 1].startswith("reference beam_ss_midspan (tol 1e-09): solved in "), err
+    assert ("impactval sweep: 2 cells: 1 ok, 1 refused before stepping (dt above the predicted stability limit), "
+            "0 unstable when stepped, 0 failed otherwise, 0 skipped") in err, err
     report = (out / "sweep.md").read_text()
     assert "refused above the predicted limit from 1e-06 s (not stepped)" in report and "brackets" not in report
     cheap = pd.read_csv(out / "cheapest.csv")
