@@ -156,15 +156,31 @@ def markdown(tuned: dict[str, Any], restitutions: Sequence[float] = DEFAULT_REST
     out += ["", "## Restitution", "",
             "The reference is elastic; its rebound speed over approach speed (the elastic truth, < 1 on a flexible "
             "target where energy stays in vibration; for two balls their separation speed over approach speed):", "", "| v0 [m/s] | reference rebound [m/s] | e |", "|---:|---:|---:|"]
-    for t in tuned.get("reference", []):
+    reference = tuned.get("reference", [])
+    for t in reference:
         out.append(f"| {t['speed']:.4g} | {_g(t['rebound_velocity'])} | {_g(t['restitution'], 5)} |")
+    following = [t["speed"] for t in reference if not float(t["restitution"]) > 0]
+    at = ", ".join(f"{v:.4g}" for v in following)
+    if following:
+        out += ["", f"**e <= 0 at v0 = {at} m/s: the ball still moves toward the structure when the first contact "
+                f"ends (it follows the structure), so re-contacts follow and this e is not the impact's rebound**; "
+                f"see them with `impactval reference SCENE --window S`."]
     out += ["", "To add dissipation, model: linear spring-dashpot (Kelvin-Voigt), contact ending when the approach "
             "returns to zero: e = exp(-pi zeta / sqrt(1 - zeta^2)), c = 2 zeta sqrt(k m). For a Hertz law k is the "
             "energy-equivalent k0 of the middle speed (an approximation); the MuJoCo columns assume a flat solimp "
-            "(d0 = dwidth), where dampratio is exactly zeta.", "",
-            "| e | zeta | k [N/m] | c [N s/m] | MuJoCo solref direct | MuJoCo solref time constant |",
-            "|---:|---:|---:|---:|---|---|"]
-    for r in restitution_rows(tuned, restitutions):
+            "(d0 = dwidth), where dampratio is exactly zeta."]
+    if following and len(following) == len(reference):
+        out += ["", "No conversion table for this scene: the model needs a single contact that ends with the ball "
+                "moving away (e > 0), and at every speed here the first contact ends with the ball still approaching "
+                "and re-contacts follow, so a damping chosen for an e would not give that e here. (For the contact "
+                "spring alone, a ball on an immovable surface: c = `impactval.tune.damping_for(e, k, m)`.)"]
+    else:
+        if following:
+            out += ["", f"The table does not describe v0 = {at} m/s, where the first contact ends with the ball "
+                    f"still approaching (e <= 0 above) and re-contacts follow."]
+        out += ["", "| e | zeta | k [N/m] | c [N s/m] | MuJoCo solref direct | MuJoCo solref time constant |",
+                "|---:|---:|---:|---:|---|---|"]
+    for r in ([] if following and len(following) == len(reference) else restitution_rows(tuned, restitutions)):
         tc = r["solref_timeconst"]
         tc_s = f"`{tc[0]:.6g} {tc[1]:.6g}`" if tc else "none (dampratio 0 is refused)"
         out.append(f"| {r['e']:g} | {r['zeta']:.5g} | {r['k']:.6g} | {r['c']:.6g} | "

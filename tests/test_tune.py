@@ -550,3 +550,56 @@ def test_tune_prints_each_engine_note_once_per_fit():
         for text in ("  note: chain capped at 113 links", "  note: chain capped at 113 links", "  note: other"):
             d.note(text)
     assert printed == ["  note: chain capped at 113 links", "  note: other"]
+
+
+#: the s19 fuzz scene fz2902: a steel ball on a simply-supported titanium beam, hit off-centre
+FZ2902 = {"name": "fz2902", "ball": {"radius": 0.0041571, "velocity": 1.985, "material": "steel"},
+          "target": {"kind": "beam", "material": "titanium", "support": "simply-supported", "length": 0.18461,
+                     "width": 0.007178, "height": 0.0025912, "impact_at": 0.1376, "theory": "euler-bernoulli"}}
+
+
+def _tuned_for_report(targets, mass: float) -> dict:
+    """A tuned.json dict around real reference targets (a linear MuJoCo spring; the fit's numbers are
+    placeholders: only the restitution section is read)."""
+    k, m_eff = 2.5e7, 1.56e-4
+    return {"engine": "mujoco", "scene": "fz2902", "contact": "native", "dt": 1e-8,
+            "speeds": [t.speed for t in targets], "engine_runs": 0, "evaluations": 0, "jobs_reused": 0,
+            "options": {"mujoco.solref": f"{-k / m_eff:.9g},0"},
+            "parameters": {"m_eff": m_eff, "solref": f"{-k / m_eff:.9g},0", "solimp": "0.0001,0.0001,0.001,0.5,2",
+                           "k": k},
+            "closed_form": {"alpha": 7.1e9, "e_star": 8.3e10, "mass": mass, "m_eff": m_eff,
+                            "linear_product_ratio": 0.8539, "k_compromise": k,
+                            "k_by_speed": [{"speed": t.speed, "k0_energy": k, "k_t_m": k, "k_f_m": k, "k_equal": k}
+                                           for t in targets]},
+            "residuals": [], "notes": [],
+            "reference": [{"speed": t.speed, "rebound_velocity": t.rebound_velocity, "restitution": t.restitution}
+                          for t in targets]}
+
+
+def test_restitution_section_says_when_the_ball_follows_the_structure():
+    """s19 fuzz finding 6: on fz2902 the reference's first contact ends with the ball still moving toward the beam
+    (e = -0.26 at 0.5 m/s, -0.36 at 5 m/s; `reference --window` shows re-contacts). tune.md listed those e as "the
+    elastic truth" without a word and converted e = 1 .. 0.5 into damping as if one contact set the rebound. Now a
+    line says so and the conversion table is left out with its reason; a scene with e > 0 keeps its table."""
+    from impactval.reports.tune import markdown
+    from impactval.scenarios.scene import scene_from_dict
+
+    scene = scene_from_dict(FZ2902)
+    beam = T.hertz_targets(scene, [0.5, 5.0])
+    assert all(t.restitution < 0 for t in beam), [t.restitution for t in beam]       # the truth this is about
+    md = markdown(_tuned_for_report(beam, scene.ball.mass), restitutions=(1.0, 0.9))
+    section = md.split("## Restitution")[1].split("## Snippet")[0]
+    assert ("e <= 0 at v0 = 0.5, 5 m/s: the ball still moves toward the structure when the first contact ends"
+            in section), section
+    assert "re-contacts follow" in section and "impactval reference SCENE --window S" in section, section
+    assert "| e | zeta |" not in section and "No conversion table for this scene" in section, section
+    # one speed with e > 0 (the rigid plate's elastic rebound, e = 1): the table is kept, qualified for the others
+    plate = impactval.load_scene("plate_steel")
+    mixed = [*T.hertz_targets(plate, [1.0]), beam[1]]
+    section = markdown(_tuned_for_report(mixed, scene.ball.mass), restitutions=(1.0, 0.9)).split(
+        "## Restitution")[1].split("## Snippet")[0]
+    assert "e <= 0 at v0 = 5 m/s" in section and "| e | zeta |" in section and "| 0.9 |" in section, section
+    assert "The table does not describe v0 = 5 m/s" in section, section
+    # every e > 0: no such line
+    section = markdown(_tuned_for_report(T.hertz_targets(plate, [1.0]), plate.ball.mass)).split("## Restitution")[1]
+    assert "e <= 0" not in section and "| 0.9 |" in section, section
