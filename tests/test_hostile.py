@@ -346,9 +346,10 @@ def test_path_checks_leave_nothing_behind(tmp_path):
         check_output_file(tmp_path / "f" / "x.csv", "--curve")
 
 
-#: two scenes refused at load (round 17's unseen batch): a ball pair whose Hertz approach passes 0.1 R, and a ball whose
-#: contact patch is wider than the beam it hits
-_TOO_FAST = """[ball]\nradius = 0.011885\nvelocity = 11.37\nmaterial = "tungsten-carbide"\n
+#: two scenes refused at load (round 17's unseen batch): a ball pair whose Hertz approach passes 0.1 R_eff (closing at
+#: 38 m/s: 0.16 R_eff; at round 17's 11.37 m/s it is 0.052 R_eff, a valid scene the old check refused with the first
+#: ball's mass on a rigid face), and a ball whose contact patch is wider than the beam it hits
+_TOO_FAST = """[ball]\nradius = 0.011885\nvelocity = 40.0\nmaterial = "tungsten-carbide"\n
 [target]\nkind = "ball"\nradius = 0.0092036\nmaterial = "pmma"\nvelocity = -1.976\n"""
 _TOO_NARROW = """[ball]\nradius = 0.010361\nvelocity = 20.43\nmaterial = "pmma"\n
 [target]\nkind = "beam"\nmaterial = "titanium"\nsupport = "simply-supported"\nlength = 0.46122\nwidth = 0.0035278

@@ -197,7 +197,7 @@ def test_a_re_rendered_night_has_the_live_header_with_its_settings_line(tmp_path
     original, redone = live.report.read_text(), paths[0].read_text()
     dt = f"{live.rows['dt'].iloc[0]:g}"
     line = (f"- **settings**: dt = {dt} s, contact = hertz, integrator = engine default, segments = engine default, "
-            f"timeout = 300 s")
+            f"timeout = 300 s (--dt auto: the engines chose these steps)")
     assert line in _header(original)
     assert line in _header(redone)
     assert _header(redone) == _header(original)                 # the suite line too ("nightly, night ..." before)
