@@ -417,6 +417,11 @@ def summary_counts(cmp: pd.DataFrame) -> dict[str, int]:
     """How many rows got each mark, plus 'changed' (any metric differs, flagged or not)."""
     out = {m: int((cmp["mark"] == m).sum()) if len(cmp) else 0 for m in ("!", "+", "*", "-", "x")}
     out["changed"] = int(cmp["changed"].sum()) if len(cmp) else 0
+    # compared rows that no engine stepped in either run (skipped both times: an unsupported scene): compared, but
+    # nothing in them could change
+    both = (cmp["mark"] != "x") & (cmp["status"].astype(str) == "skipped") & (cmp["old_status"].astype(str) == "skipped") \
+        if len(cmp) and {"status", "old_status"} <= set(cmp) else pd.Series(dtype=bool)
+    out["skipped_both"] = int(both.sum())
     return out
 
 

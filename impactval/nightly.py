@@ -408,8 +408,10 @@ def nightly(scenes: Iterable | None = None, engines: Iterable[str] | str | None 
             else:
                 good = True
                 counts = history.summary_counts(cmp)
+                skipped = (f" ({counts['skipped_both']} of them skipped in both nights)" if counts["skipped_both"]
+                           else "")
                 message = (f"no regression against the baseline run {base['id']} ({history.comparable(cmp)} of "
-                           f"{len(cmp)} rows compared, {counts['changed']} changed, {counts['-']} better, "
+                           f"{len(cmp)} rows compared{skipped}, {counts['changed']} changed, {counts['-']} better, "
                            f"{counts['*']} fixed)")
         base_id = None if base is None else str(base["id"])
         _record_verdict(db, run_id, suite, night, code, base_id, message, history.check_names(checks), good)

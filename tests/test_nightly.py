@@ -331,3 +331,18 @@ def test_a_job_failing_from_the_first_night_is_not_new(tmp_path):
     second = go()
     assert second.exit_code == 0 and second.baseline_run_id == first.run_id, second.message
     assert list(second.cmp["mark"]) == ["", ""]
+
+
+@requires_mujoco
+def test_rows_skipped_in_both_nights_are_counted_apart(tmp_path):
+    """A night's verdict said "2 of 2 rows compared" where one row was an engine skipping an unsupported scene in both
+    nights (nothing in it could change): the count of those is now part of the line."""
+    from impactval.nightly import nightly
+
+    store = tmp_path / "n.sqlite"
+    for out in ("a", "b"):
+        res = nightly(["plate_steel", "plate_ss_rectangular"], "mujoco", EngineSettings(dt="auto"), store=store,
+                      out=tmp_path / out)
+        assert res.exit_code == 0, res.message
+    assert set(res.rows["status"]) == {"ok", "skipped"}
+    assert "(2 of 2 rows compared (1 of them skipped in both nights), 0 changed" in res.message, res.message
