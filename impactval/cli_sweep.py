@@ -134,7 +134,7 @@ def sweep_command(scene, engines, dt, integrator, segments, modes, contact, opti
     from impactval.reports.sweep import cell_counts
 
     # how the cells ended, refused-before-stepping apart from stepped-and-unstable (the per-cell progress lines
-    # above show both as "unstable")
+    # above name each refusal too: impactval.progress)
     click.echo(f"impactval sweep: {cell_counts(df)}", err=True)
     cheap = sw.cheapest(df, unders)
     for _, c in cheap.iterrows():
