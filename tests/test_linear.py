@@ -290,6 +290,9 @@ def test_mode_count_at_its_cap_says_the_uncertainty_is_above_tol(monkeypatch):
               capped.uncertainty.delta_m / capped.delta_m)
     assert capped.modes < 64 < free.modes and rel > 1e-9
     assert len(capped.validity) == 1 and "above tol 1e-09" in capped.validity[0]
+    # the count kept and the one it was measured against (which reached the cap), not "stopped below the cap"
+    assert f"stopped at {capped.modes} modes, measured against {2 * capped.modes}" in capped.validity[0]
+    assert 2 * capped.modes >= 64
     out = CliRunner().invoke(main, ["reference", "beam_ss_midspan", "--model", "linear", "--tol", "1e-9"])
     assert out.exit_code == 0, out.output
     assert "! uncertainty" in out.output and "above tol 1e-09" in out.output
