@@ -76,6 +76,12 @@ def axial_noise_blows_up(noise_j: float, impact_energy: float, floor_j: float, s
     return not (noise_j <= stop * impact_energy or noise_j <= floor_stop * floor_j)
 
 
+def floor_text(noise_j: float, floor_j: float) -> str:
+    """The axial noise [J] against its float32 floor [J] (`axial_noise_floor_J`), for a row's note: '22x its float32
+    floor' (a slow ball's noise can be 1e6x the impact energy and still be rounding: the floor says so)."""
+    return f"{noise_j / floor_j:.3g}x its float32 floor" if floor_j > 0 else "its float32 floor unknown"
+
+
 def share_text(fraction: float) -> str:
     """A share of the impact energy as '14 %' below 10x and '5.6e+04x' above (a slow ball's noise can be 1e7 %)."""
     return f"{100 * fraction:.3g} %" if fraction < 10 else f"{fraction:.3g}x"

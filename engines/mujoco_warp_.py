@@ -349,7 +349,7 @@ def _check_axial_noise(scene, dt: float, mjm, axial: np.ndarray, impact_energy: 
     (relative to the impact energy) with a note beyond AXIAL_NOISE_NOTE; a run beyond both AXIAL_NOISE_STOP x the
     impact energy and AXIAL_FLOOR_STOP x the float32 floor 1/2 m_beam (ulp(L)/dt)^2 is unstable (a blow-up)."""
     from impactval.engines._warp import (AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP, axial_noise_blows_up,
-                                         share_text)
+                                         floor_text, share_text)
     from impactval.engines.base import EngineDiverged
 
     target = scene.target
@@ -366,8 +366,9 @@ def _check_axial_noise(scene, dt: float, mjm, axial: np.ndarray, impact_energy: 
                              f"{AXIAL_NOISE_STOP:g}x and {AXIAL_FLOOR_STOP:g}x)", diagnostics)
     if noise > AXIAL_NOISE_NOTE:
         notes.append(f"float32 rounding of the chain's x positions put {share_text(noise)} of the impact energy into "
-                     f"its motion along the beam; the contact does not see it and the energy check uses the rest "
-                     f"(docs/mujoco-warp.md)")
+                     f"its motion along the beam, {floor_text(noise_j, floor)}; the contact does not see it and the "
+                     f"energy check uses the rest; unstable only beyond {AXIAL_NOISE_STOP:g}x the impact energy and "
+                     f"{AXIAL_FLOOR_STOP:g}x the floor (docs/mujoco-warp.md)")
 
 
 class _SameModelInC(MujocoAdapter):

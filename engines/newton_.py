@@ -80,7 +80,8 @@ ATTACH_KE = 1e9
 #: AXIAL_NOISE_NOTE, and a run is unstable beyond both AXIAL_NOISE_STOP x the impact energy and AXIAL_FLOOR_STOP x
 #: its float32 floor N attach_ke ulp(L/2)^2 (`axial_noise_floor`; the limits shared with MuJoCo Warp, engines/_warp.py)
 from impactval.engines._warp import (AXIAL_FLOOR_STOP, AXIAL_NOISE_NOTE, AXIAL_NOISE_STOP,  # noqa: E402
-                                     axial_noise_blows_up, float32_contact_note, share_text)
+                                     axial_noise_blows_up, float32_contact_note, floor_text,
+                                     share_text)
 #: a predicted model_error beyond this (the beam bar of issue 19, the MuJoCo C chain's) heads the row's validity
 MODEL_ERROR_BAR = 0.015
 #: steps replayed between host checks of the contact state (after a first chunk sized to the contact)
@@ -512,8 +513,10 @@ class NewtonAdapter(EngineAdapter):
                                      f"{self.axial_floor_stop:g}x; attach_ke {ke:.3g} N/m)", diagnostics)
             if noise > AXIAL_NOISE_NOTE:
                 validity += (f"newton: float32 rounding of the joints' x positions put {share_text(noise)} of the impact "
-                            f"energy into the chain's axial vibration (attach_ke {ke:.3g} N/m); the contact "
-                            f"does not see it and the energy check uses the rest (docs/newton.md)",)
+                            f"energy into the chain's axial vibration (attach_ke {ke:.3g} N/m), "
+                            f"{floor_text(noise * energy[0], floor)}; the contact does not see it and the energy check "
+                            f"uses the rest; unstable only beyond {self.axial_noise_stop:g}x the impact energy and "
+                            f"{self.axial_floor_stop:g}x the floor (docs/newton.md)",)
         if lay["segments"]:
             diagnostics["segments"] = lay["segments"]
         kind = "rigid-plate" if lay["kind"] == "rigid-plate" else f"hencky-chain-{lay['segments']}"
