@@ -22,7 +22,9 @@ from impactval.errors import ImpactvalError
 @click.option("--contact", default="native", show_default=True, type=click.Choice(["native", "native-hertz"]),
               help="native: a linear spring (the best compromise over the speeds); native-hertz: a Hertz-shaped law "
                    "(MuJoCo solimp shape, Exudyn exponent 1.5).")
-@click.option("--dt", default=None, type=float, help="Engine time step [s] (default: shortest contact / 2000, 1-2-5).")
+@click.option("--dt", default=None, type=float,
+              help="Engine time step [s] (default: shortest Hertz contact / 500, rounded down to 1-2-5: the engines' "
+                   "step error on t_m, f_m, delta_m < 1e-5; at most half the engine's stability limit at every speed).")
 @click.option("--out", "out", default="impactval-tune", show_default=True, type=click.Path(file_okay=False),
               help="Directory for tuned.json, tune.md, tune_force.png and the fit's store tune.sqlite.")
 @click.option("--store", default=None, metavar="PATH|URL", help="Result store of the fit's engine runs "

@@ -52,8 +52,23 @@ MUJOCO_FLAT_IMPEDANCE = 1e-4
 MUJOCO_SHAPED_DMAX = 1e-3
 #: contactERP of PyBullet's global route (the adapter's default)
 PYBULLET_ERP = 1e3
-#: steps per shortest Hertz contact time for the default fixed dt
-STEPS_PER_SHORTEST_CONTACT = 2000
+#: The default fixed step is sized from the engines' time-step error. Their contact integration converges at order 2:
+#: a job's t_m, f_m and delta_m at N = t_H(v) / dt steps per rigid-plate Hertz contact time t_H(v) are off from their
+#: dt -> 0 limit by c / N^2 (relative), c constant to 1 % over N = 100 .. 3200. Measured on `plate_steel` at 0.3, 1,
+#: 3 m/s with each engine's fitted options held fixed, N = 100 .. 3200 (Richardson limit of the two finest):
+#: |c| <= 2.31 (MuJoCo linear spring, f_m and delta_m at 0.3 m/s, where the spring's contact is 27 % shorter than
+#: Hertz's), 1.34 (Exudyn 1.5 law, f_m), 1.31 (MuJoCo Hertz-shaped solimp, f_m), 1.97 (PyBullet ERP/CFM, f_m; two
+#: terms there, not monotonic); STEP_ERROR_C bounds them all.
+STEP_ERROR_C = 2.5
+#: the step error the default allows on each fitted metric (relative): the last printed digit of tune.md's residual
+#: table (0.001 %); a fit at the default step and one at a finer step then print the same residuals within that digit
+#: (Exudyn's alpha: 2.65e-6 off at N = 553, 0.8 / N^2; 5e-8 at N = 2767)
+STEP_ERROR_TARGET = 1e-5
+#: steps per shortest Hertz contact time for the default fixed dt: the smallest N with STEP_ERROR_C / N^2 <=
+#: STEP_ERROR_TARGET (500); `default_dt` rounds t_H / N down to 1-2-5, so the engines take 500 .. 1250 steps. It was
+#: 2000 before (a fit of MuJoCo on a beam, fz2902: 36 jobs at 1e-8 s, 16.8 min; its options at 5e-8 s gave the same
+#: residuals to 0.001 %)
+STEPS_PER_SHORTEST_CONTACT = math.ceil(math.sqrt(STEP_ERROR_C / STEP_ERROR_TARGET) - 1e-9)
 
 
 # ---------------------------------------------------------------------------- speeds and scenes
@@ -98,11 +113,13 @@ def contact_mass(scene) -> float:
 
 def default_dt(scene, speeds: Sequence[float], engine: str | None = None, contact: str = "native",
                integrator: str | None = None) -> float:
-    """A fixed engine step [s]: the shortest rigid-plate Hertz contact time over `speeds` / 2000,
-    rounded down to a 1-2-5 value (one dt for every speed, so an emitted ERP/CFM pair stays valid); with
-    `engine`, also at most DT_MARGIN x the engine model's predicted explicit stability limit at the fastest
-    speed (a beam chain's own modes: on cc_short_heavy_ball the contact alone gave 2e-7 s, above PyBullet's
-    chain limit 1.7e-7 s, and every fit run was refused as unstable)."""
+    """A fixed engine step [s]: the shortest rigid-plate Hertz contact time over `speeds` / STEPS_PER_SHORTEST_CONTACT
+    (500: the engines' order-2 step error STEP_ERROR_C / N^2 on t_m, f_m, delta_m stays below STEP_ERROR_TARGET =
+    1e-5), rounded down to a 1-2-5 value (one dt for every speed, so an emitted ERP/CFM pair stays valid); with
+    `engine`, also at most DT_MARGIN x the engine model's predicted explicit stability limit at every speed (a beam
+    chain's own modes: on cc_short_heavy_ball the contact alone gave 2e-7 s, above PyBullet's chain limit 1.7e-7 s, and
+    every fit run was refused as unstable; the chain is sized per speed, and on fz2902 MuJoCo's limit is lowest at the
+    slowest speed: 3.15e-8 s at 0.5 m/s (287 segments), 1.07e-7 s at 5 m/s)."""
     from impactval.engines.base import DT_MARGIN, EngineSettings, nice_step
 
     t_short = min(plate_impact(contact_mass(scene), scene.alpha, v).t_m for v in speeds)
@@ -112,13 +129,17 @@ def default_dt(scene, speeds: Sequence[float], engine: str | None = None, contac
     from impactval.engines.base import EngineError, load_adapter
 
     adapter = load_adapter(engine)
-    try:
-        plan = adapter.plan(at_speed(scene, max(speeds)),
-                            adapter.check_settings(EngineSettings(dt=dt, contact=contact, integrator=integrator)))
-    except EngineError:                 # an unsupported scene: the engine run says so, as a status row
-        return dt
-    if math.isfinite(plan.dt_limit) and plan.dt_limit > 0:
-        dt = min(dt, nice_step(DT_MARGIN * plan.dt_limit))
+    limits = []
+    for v in sorted(set(speeds)):
+        try:
+            plan = adapter.plan(at_speed(scene, v),
+                                adapter.check_settings(EngineSettings(dt=dt, contact=contact, integrator=integrator)))
+        except EngineError:             # an unsupported scene: the engine run says so, as a status row
+            return dt
+        if math.isfinite(plan.dt_limit) and plan.dt_limit > 0:
+            limits.append(plan.dt_limit)
+    if limits:
+        dt = min(dt, nice_step(DT_MARGIN * min(limits)))
     return dt
 
 

@@ -190,13 +190,13 @@ def test_tune_default_dt_stays_below_the_engine_models_stability_limit():
     """`tune pybullet cc_short_heavy_ball --speeds 0.02:0.1:2` took dt = 2e-7 s from the contact time alone, above
     the 27-link chain's limit 1.7e-7 s: every fit run was refused (unstable) and the emitted options were never
     evaluated (exit 1). The default now stays below DT_MARGIN x the engine model's predicted limit (then: 5e-8 s,
-    both speeds ok)."""
+    both speeds ok). Since round 20 the contact time alone gives 5e-7 s (500 steps per contact, not 2000)."""
     pytest.importorskip("pybullet", reason="pip install 'impactval[pybullet]'")
     from impactval.engines.base import EngineSettings as ES, load_adapter
     from impactval.tune import at_speed, default_dt
 
     scene, speeds = _scene("cc_short_heavy_ball"), [0.02, 0.1]
-    assert default_dt(scene, speeds) == 2e-7                               # the contact time alone
+    assert default_dt(scene, speeds) == 5e-7          # the contact time alone (437 us / 500 steps, 1-2-5 down)
     adapter = load_adapter("pybullet")
     limit = adapter.plan(at_speed(scene, 0.1), adapter.check_settings(ES(dt=1e-7, contact="native"))).dt_limit
     assert 1.5e-7 < limit < 2e-7
