@@ -2,8 +2,10 @@
 
 Rows are matched on KEY = (scene, engine, contact, integrator, dt, segments): the scene and the
 settings that fix what a job computes. A matched pair is comparable only when both rows have the
-same `scene_hash` (canonical scene + reference version), so a changed scene file or reference is
-never reported as an engine change. The engine version is a separate axis: rows of different engine
+same `scene_hash` (canonical scene and impactval's version) and their reference values (ref_t_m,
+ref_f_m, ref_delta_m) agree within REFERENCE_MOVE_LIMIT, so a changed scene file or a reference that
+moved is never reported as an engine change (a reference whose code changed but whose values did not
+leaves the rows comparable). The engine version is a separate axis: rows of different engine
 versions are compared (that is what an upgrade check is for) and the report names both versions.
 
 Errors are deterministic, so every change is real; a row is flagged when the |error| of a metric
@@ -11,7 +13,7 @@ grows past that metric's threshold (`parse_fail_on("f_m:+20%")`). Marks:
 
 | mark | meaning |
 |---|---|
-| `x` | not comparable (no baseline row with this key, or the scene or reference changed) |
+| `x` | not comparable (no baseline row with this key, the scene changed, or the reference's values moved) |
 | `!` | newly failing (the baseline row had a result, this one has none) |
 | `*` | fixed (the baseline row failed, this one has a result) |
 | `+` | worse: some metric's |error| grew past its threshold |
@@ -37,6 +39,12 @@ KEY = ("scene", "engine", "contact", "integrator", "dt", "segments")
 METRICS = {"t_m": "err_t_m", "f_m": "err_f_m", "delta_m": "err_delta_m", "curve": "err_curve"}
 #: smallest absolute change of an |error| (as a fraction: 1e-5 = 0.001 percentage points) that can be flagged
 ABS_FLOOR = 1e-5
+#: largest relative move of the reference's t_m, f_m, delta_m between a row and its baseline that leaves them comparable:
+#: half of ABS_FLOOR, so a move of the reference alone (an error moves with it by about as much) cannot flag a row.
+#: Two honest references at the default tol 1e-6 differ by at most 2e-6; a reference that moved more has been changed
+REFERENCE_MOVE_LIMIT = 0.5 * ABS_FLOOR
+#: the reference's values in a results row
+REFERENCE_COLUMNS = {"t_m": "ref_t_m", "f_m": "ref_f_m", "delta_m": "ref_delta_m"}
 #: default relative growth of |error| that flags a row (0.2 = +20 %)
 DEFAULT_THRESHOLD = 0.2
 #: default relative step of the stepping wall time, persisting over WALL_WINDOW nights, that flags a row
@@ -144,6 +152,19 @@ def _num(x) -> float:
         return math.nan
 
 
+def reference_moved(old, new) -> str:
+    """"" when two rows' reference values (REFERENCE_COLUMNS) agree within REFERENCE_MOVE_LIMIT (relative), or when
+    either row has none (a failed job's reference may be missing); else the moves in words ('t_m +3.1e-05, f_m
+    -1.2e-05')."""
+    moves = []
+    for m, col in REFERENCE_COLUMNS.items():
+        a = _num(old.get(col)) if col in old else math.nan
+        b = _num(new.get(col)) if col in new else math.nan
+        if math.isfinite(a) and math.isfinite(b) and a != 0.0 and abs(b / a - 1.0) > REFERENCE_MOVE_LIMIT:
+            moves.append(f"{m} {b / a - 1.0:+.2g}")
+    return ", ".join(moves)
+
+
 def score(row) -> float:
     """Largest |relative error| over t_m, f_m, delta_m (NaN when the row has no numbers)."""
     vals = [abs(_num(row[k])) for k in ("err_t_m", "err_f_m", "err_delta_m") if k in row]
@@ -224,6 +245,9 @@ def compare(new: pd.DataFrame, old: pd.DataFrame, checks: float | dict[str, Thre
             mark, why = "x", "no baseline row with this scene, engine and settings"
         elif str(o.get("scene_hash", "")) != str(r.get("scene_hash", "")):
             mark, why = "x", f"scene or reference changed (scene hash {o.get('scene_hash', '')} -> {r.get('scene_hash', '')})"
+        elif moved := reference_moved(o, r):
+            mark, why = "x", (f"reference changed: its values moved by {moved} (relative; comparable within "
+                              f"{REFERENCE_MOVE_LIMIT:.0e})")
         elif _ok(o["status"]) and not _ok(r["status"]):
             msg = " ".join(str(r.get("message", "") or "").split())
             mark, why = "!", f"{o['status']} -> {r['status']}: {msg}".rstrip(": ")
@@ -350,10 +374,13 @@ def require_comparable(cmp: pd.DataFrame, new: pd.DataFrame, old: pd.DataFrame, 
     never a pass. The message names the keys that differ."""
     if len(new) and comparable(cmp) == 0:
         diff = differing_keys(new, old)
+        moved = [str(w) for w in cmp.get("why", ()) if str(w).startswith("reference changed")]
         raise ImpactvalError(f"nothing comparable with {baseline}: none of the {len(new)} rows has a baseline row "
                              f"with the same scene, engine, settings and scene hash"
                              + (f"; differing: {' | '.join(diff)}" if diff else "")
-                             + ". Rerun the baseline with these settings, or use the baseline's settings.")
+                             + (f"; {len(moved)} of them matched a baseline row but the {moved[0]}" if moved else "")
+                             + (". Rerun the baseline with this version" if moved else
+                                ". Rerun the baseline with these settings, or use the baseline's settings") + ".")
 
 
 def wall_time_steps(history: pd.DataFrame, threshold: float = DEFAULT_WALL_THRESHOLD,

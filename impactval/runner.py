@@ -148,8 +148,10 @@ def _num(x: Any) -> float:
 
 
 def scene_hash(scene) -> str:
-    """Identity of what a row measured: the canonical scene (ball, target, materials) and the
-    reference version; rows with different hashes are never compared (impactval.history)."""
+    """Identity of the scene a row measured: the canonical scene (ball, target, materials) and impactval's version
+    (not the reference solver's: `impactval.history` compares rows whose hashes agree when their stored reference
+    values agree too, so a solver whose code changed but whose values did not keeps a night comparable); rows with
+    different hashes are never compared."""
     import hashlib
 
     import impactval

@@ -151,3 +151,47 @@ def test_wall_time_steps_need_a_persisting_step():
     assert state([1.0, 1.1, 0.9, 0.5, 0.5, 0.6]) == "faster"
     r = wall_time_steps(_hist([1.0, 1.0, 1.0, 2.0, 2.0, 2.0]))
     assert r["ratio"][0] == pytest.approx(2.0) and r["nights"][0] == 6
+
+
+def test_a_reference_that_moved_is_not_compared_one_that_did_not_is():
+    """Round 20 (fuzz): the scene hash holds impactval's version, not the reference solver's, so a night after a
+    reference change compared engines against a different truth ('0 of 1 rows marked' across reference versions
+    5810... -> f1cd...). Rows are comparable only when their stored reference values agree within
+    REFERENCE_MOVE_LIMIT (5e-6 relative): a reference that moved by 1e-4 makes the row `x` with the move named, even
+    where the engine's error grew (a moved truth is not an engine regression); one that moved by 1e-7 (the same
+    solver's roundoff, or a refactor) keeps it compared."""
+    from impactval.history import REFERENCE_MOVE_LIMIT
+
+    ref = dict(ref_t_m=1e-4, ref_f_m=2e3, ref_delta_m=5e-5)
+    moved = dict(ref, ref_t_m=1e-4 * (1 + 1e-4))
+    cmp = compare(pd.DataFrame([row(err=2e-3, **moved)]), pd.DataFrame([row(err=1e-3, **ref)]))
+    assert list(cmp["mark"]) == ["x"] and "reference changed" in cmp["why"][0] and "t_m +0.0001" in cmp["why"][0]
+    same = dict(ref, ref_t_m=1e-4 * (1 + 1e-7))
+    assert marks([row(err=1e-3, **ref)], [row(err=2e-3, **same)]) == ["+"]
+    assert marks([row(err=1e-3, **ref)], [row(err=1e-3, **same)]) == [""]
+    # at the limit itself still comparable, just past it not
+    edge = dict(ref, ref_f_m=2e3 * (1 + 0.9 * REFERENCE_MOVE_LIMIT))
+    past = dict(ref, ref_f_m=2e3 * (1 + 1.1 * REFERENCE_MOVE_LIMIT))
+    assert marks([row(**ref)], [row(**edge)]) == [""] and marks([row(**ref)], [row(**past)]) == ["x"]
+    # a failed row has no reference values: its status still compares
+    assert marks([row(**ref)], [row(status="unstable", err=math.nan)]) == ["!"]
+    with pytest.raises(ImpactvalError, match="matched a baseline row but the reference changed: its values moved by "
+                                             "t_m \\+0.0001.*Rerun the baseline with this version"):
+        require_comparable(cmp, pd.DataFrame([row(**moved)]), pd.DataFrame([row(**ref)]), "base.csv")
+
+
+@requires_mujoco
+def test_baseline_of_another_reference_is_not_comparable(tmp_path):
+    """End to end: a real run's results.csv as the baseline, its reference t_m moved by 1e-4 (what a changed solver
+    writes): the next run against it exits 2 naming the move, not 0 with '0 of 1 rows marked'."""
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--engines", "mujoco", "--tol", "1e-5",
+           "--dt", "1e-6"]
+    first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr
+    df = pd.read_csv(tmp_path / "a" / "results.csv")
+    df["ref_t_m"] = df["ref_t_m"] * (1 + 1e-4)
+    other = tmp_path / "other_reference.csv"
+    df.to_csv(other, index=False)
+    out = subprocess.run(cmd + ["--out", str(tmp_path / "b"), "--baseline", str(other)], capture_output=True, text=True)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "reference changed: its values moved by t_m -0.0001" in out.stderr
