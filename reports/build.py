@@ -99,6 +99,10 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
             except ImpactvalError as exc:       # refused (its rows are uncompared, see compare.NO_REFERENCE)
                 notes.append(f"{name}: no reference at tol {tol:g}: {exc}")
                 continue
+        moved = _reference_moved(g, ref)
+        if moved:
+            notes.append(f"{name}: the reference's values moved since this run ({moved}, relative): the rows' errors "
+                         f"are against the run's reference, the reference values and curve shown are today's")
         refs.append(reference_record(scene, ref))
         if not plots:
             continue
@@ -126,6 +130,21 @@ def scene_figures(store, rows: pd.DataFrame, out: Path, tol: float = 1e-6, plots
                             + (" and the linear theory (k0 of the engine's contact)" if linear is not None else ""),
                             path.name))
     return figures, pd.DataFrame(refs), notes
+
+
+def _reference_moved(rows: pd.DataFrame, ref) -> str:
+    """`history.reference_moved` between the reference values stored on a scene's rows (the first row that has them)
+    and the reference `ref` solved now: "" when they agree (or no row has them)."""
+    from impactval.history import REFERENCE_COLUMNS, reference_moved
+
+    cols = list(REFERENCE_COLUMNS.values())
+    if not set(cols) <= set(rows.columns):
+        return ""
+    have = rows[pd.to_numeric(rows["ref_t_m"], errors="coerce").notna()]
+    if not len(have):
+        return ""
+    now = {col: float(getattr(ref, m)) for m, col in REFERENCE_COLUMNS.items()}
+    return reference_moved(have.iloc[0], now)
 
 
 def run_info(store, run_id: str, title: str | None = None) -> dict[str, Any]:

@@ -346,3 +346,27 @@ def test_rows_skipped_in_both_nights_are_counted_apart(tmp_path):
         assert res.exit_code == 0, res.message
     assert set(res.rows["status"]) == {"ok", "skipped"}
     assert "(2 of 2 rows compared (1 of them skipped in both nights), 0 changed" in res.message, res.message
+
+
+@requires_mujoco
+def test_a_re_rendered_report_says_when_the_reference_moved_since_the_run(tmp_path):
+    """Round 20: a report re-rendered after the reference solver changed showed today's reference values next to
+    errors computed against the run's, without a word. The store's rows hold the run's reference values: a re-render
+    whose reference differs from them by more than history.REFERENCE_MOVE_LIMIT says so, naming the move; an
+    unchanged one says nothing."""
+    import sqlite3
+
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "impactval.cli"]
+    r = subprocess.run(cmd + ["run", "plate_steel", "--engines", "mujoco", "--dt", "1e-6", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    same = subprocess.run(cmd + ["report", str(out), "--out", str(tmp_path / "same")], capture_output=True, text=True)
+    assert same.returncode == 0, same.stderr
+    assert "moved since this run" not in (tmp_path / "same" / "report.md").read_text()
+    with sqlite3.connect(out / "impactval.sqlite") as db:          # the run's reference, as an older solver gave it
+        db.execute("UPDATE jobs SET ref_f_m = ref_f_m * 1.001")
+    moved = subprocess.run(cmd + ["report", str(out), "--out", str(tmp_path / "moved")], capture_output=True, text=True)
+    assert moved.returncode == 0, moved.stderr
+    text = (tmp_path / "moved" / "report.md").read_text()
+    assert "plate_steel: the reference's values moved since this run (f_m -0.001, relative)" in text
