@@ -60,6 +60,26 @@ def test_yield_flag_follows_the_material_yield_stress():
     assert HERTZ_DELTA_OVER_R == 0.01
 
 
+def test_a_structural_steel_beam_yields_where_bearing_steel_does_not():
+    """Round 20 (fuzz): a steel cantilever (0.3 x 0.015 x 0.006 m) hit at 0.9 L by an 8 mm glass ball at 0.5 m/s
+    reaches p0 ~ 1.15 GPa, twice the 1.6 x 355 MPa at which S355 yields, but the built-in "steel" carries hardened
+    bearing steel's 2 GPa and said nothing. The built-in structural-steel (S355) flags it, naming its 355 MPa; the
+    same beam as "steel" stays unflagged (below 1.6 x 2 GPa). p0 from Johnson's closed form of the solved f_m."""
+    beam = {"kind": "beam", "support": "cantilever", "length": 0.3, "width": 0.015, "height": 0.006,
+            "impact_at": 0.9}
+    doc = {"name": "cant", "ball": {"radius": 0.008, "velocity": 0.5, "material": "glass"}}
+    structural = scene_from_dict({**doc, "target": {**beam, "material": "structural-steel"}})
+    r = impactval.solve(structural, tol=1e-6)
+    E = structural.e_star
+    p0 = (6 * r.f_m * E**2 / (math.pi**3 * 0.008**2)) ** (1 / 3)
+    assert 1.6 * 355e6 * 1.5 < p0 < 1.6 * 2.0e9
+    flags = [w for w in r.validity if w.startswith("yield:")]
+    assert len(flags) == 1 and "structural-steel, 0.355 GPa" in flags[0] and f"p0 = {p0 / 1e9:.3g} GPa" in flags[0]
+    bearing = impactval.solve(scene_from_dict({**doc, "target": {**beam, "material": "steel"}}), tol=1e-6)
+    assert not any(w.startswith("yield:") for w in bearing.validity)
+    assert bearing.f_m == pytest.approx(r.f_m, rel=2e-3)          # same E and nu; density 7850 against 7800
+
+
 def test_bad_yield_stress_is_a_one_line_error():
     with pytest.raises(impactval.ImpactvalError, match="yield_stress"):
         _scene(materials={"soft": {"young": 2e11, "poisson": 0.3, "density": 7800, "yield_stress": -1}},
