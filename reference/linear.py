@@ -22,6 +22,18 @@ law this is exact: f = k delta = k_s (x1 - sum phi q), k_s = k/(1 + k R), and de
 
 After separation (window > 0) the ball flies freely and the modes vibrate freely (closed form); a
 re-contact starts at the next upward zero of the gap and is solved from its state in the same way.
+
+Memory: with distinct frequencies U is never stored. Its columns are explicit from the secular equation,
+U[:, k] ~ C_k b_j / m_j / (d_j - lam_k) (a Cauchy-like matrix), so `LinearSystem` keeps O(modes) numbers (lam as
+pole + offset, C, the sorted d, b/m) and forms U^T M z0 (a contact's start) and U a (its end state) a block of
+columns at a time, each d_j - lam_k as (d_j - d_origin) - mu like the roots; the series needs only U's rows for x1
+and phi^T q (`x1_row`, `x2_row`, made in the roots' own pass), and the first contact's start (the ball's velocity
+alone) only U's row 0. Measured on tests/data/plate_thousands_of_modes.toml (`solve_linear`, automatic count up to
+7,424 modes): peak RSS 280 MB instead of 928-963 MB with U stored (441 MB a copy at 7,425 modes; the imports alone
+take 135 MB), the same time within this shared machine's noise (26 s vs 23 s wall; interleaved, linear_system at
+7,424 modes took 5-12 s either way) and the same metrics to the last bit. On catalogue and random beams and plates
+the results equal the stored-U solution's within 4e-16 (metrics) and 3e-13 (series over nine re-contacts).
+Repeated frequencies take a dense eigh and keep U, O(modes^2).
 """
 from __future__ import annotations
 
@@ -40,7 +52,7 @@ from impactval.reference.result import Contact, ImpactResult, Metrics
 #: grid points per estimated contact time used to bracket roots (and to sample the series)
 GRID_PER_CONTACT = 4000
 #: the automatic mode count doubles until the n- and 2n-mode models agree within tol or 2n reaches this (n is kept;
-#: a 7,424-mode plate takes ~16 s and ~1 GB): beyond it the result says its uncertainty is above tol
+#: a 7,424-mode plate takes ~16 s and ~0.3 GB, U not stored): beyond it the result says its uncertainty is above tol
 LINEAR_MODE_CAP = 4096
 #: give up looking for the end of a contact after this many estimated contact times
 MAX_CONTACT_TIMES = 200.0
@@ -50,15 +62,21 @@ MAX_CONTACT_TIMES = 200.0
 class LinearSystem:
     """Ball + n modes with a linear contact spring, diagonalised.
 
-    `p` [rad/s] natural frequencies in contact, `U` M-orthonormal eigenvectors (columns), `bU`
-    = b^T U / (1 + k R) (contact approach per modal coordinate), `mass_diag` [kg], `omega` [rad/s]
-    and `phi` [-] of the kept modes, `k` [N/m] the contact stiffness, `R` [m/N] residual flexibility;
-    `x1_row` = U[0] (ball displacement per eigen-coordinate) and `x2_row` = phi^T U[1:] (the modes'
-    displacement at the contact point per eigen-coordinate).
+    `p` [rad/s] natural frequencies in contact, `bU` = b^T U / (1 + k R) (contact approach per modal coordinate),
+    `mass_diag` [kg], `omega` [rad/s] and `phi` [-] of the kept modes, `k` [N/m] the contact stiffness, `R` [m/N]
+    residual flexibility; `x1_row` = U[0] (ball displacement per eigen-coordinate) and `x2_row` = phi^T U[1:] (the
+    modes' displacement at the contact point per eigen-coordinate). U, the M-orthonormal eigenvectors (columns), is
+    applied by `project` (U^T Y) and `expand` (U X); the `U` property forms it (O(modes^2): small systems, tests).
+
+    Distinct frequencies (the rank-one path, `_secular`): U is not stored. Its columns are explicit,
+    U[order[j], k] = w_j C_k / ((d_j - d_origin_k) - mu_k) (a Cauchy-like matrix: `d` the sorted d = (0, omega^2),
+    `w` = sign(b_j) |b_j| / m_j in that order, lam_k = d_origin_k + mu_k), so the system keeps O(modes) numbers
+    and `project`/`expand` form the kernel a block of columns at a time (`_BLOCK_ENTRIES`), each d_j - lam_k in
+    the same full-relative-accuracy form as the roots (7,425 modes: U was 441 MB). Repeated frequencies (the
+    dense path, `linalg.eigh`): `dense` holds U, O(modes^2).
     """
 
     p: np.ndarray
-    U: np.ndarray
     bU: np.ndarray
     mass_diag: np.ndarray
     omega: np.ndarray
@@ -67,10 +85,80 @@ class LinearSystem:
     R: float
     x1_row: np.ndarray
     x2_row: np.ndarray
+    dense: np.ndarray | None = None       # U itself (repeated frequencies only)
+    order: np.ndarray | None = None       # rows of U in ascending d (None: the identity)
+    d: np.ndarray | None = None           # sorted d
+    origin: np.ndarray | None = None      # the pole each root is measured from (index into d)
+    mu: np.ndarray | None = None          # lam - d[origin]
+    C: np.ndarray | None = None           # column scales
+    w: np.ndarray | None = None           # row scales sign(b) |b| / m (sorted)
+
+    def project(self, Y: np.ndarray) -> np.ndarray:
+        """U^T Y for Y [modes + 1] or [modes + 1, r] (a Y with few nonzero rows, e.g. the first contact's ball
+        velocity alone, from those rows of U only: O(modes) each)."""
+        if self.dense is not None:
+            return self.dense.T @ Y
+        Y = np.asarray(Y, float)
+        nz = np.flatnonzero(Y if Y.ndim == 1 else np.any(Y != 0.0, axis=1))
+        if 8 * len(nz) <= len(Y):
+            return self.rows(nz).T @ Y[nz]
+        Ys = (Y if self.order is None else Y[self.order]) * (self.w if Y.ndim == 1 else self.w[:, None])
+        out = np.empty(Y.shape)
+        for sl, inv in _cauchy_blocks(self.d, self.origin, self.mu):
+            out[sl] = inv.T @ Ys
+        return out * (self.C if Y.ndim == 1 else self.C[:, None])
+
+    def expand(self, X: np.ndarray) -> np.ndarray:
+        """U X for X [modes + 1] or [modes + 1, r]."""
+        if self.dense is not None:
+            return self.dense @ X
+        X = np.asarray(X, float)
+        Xc = X * (self.C if X.ndim == 1 else self.C[:, None])
+        acc = np.zeros(X.shape)
+        for sl, inv in _cauchy_blocks(self.d, self.origin, self.mu):
+            acc += inv @ Xc[sl]
+        acc *= self.w if X.ndim == 1 else self.w[:, None]
+        if self.order is None:
+            return acc
+        out = np.empty_like(acc)
+        out[self.order] = acc
+        return out
+
+    def rows(self, idx: np.ndarray) -> np.ndarray:
+        """U[idx] (rows of the original coordinates), [len(idx), modes + 1]."""
+        idx = np.asarray(idx, dtype=np.intp)
+        if self.dense is not None:
+            return self.dense[idx]
+        if self.order is None:
+            j = idx
+        else:
+            where = np.empty_like(self.order)
+            where[self.order] = np.arange(len(self.order))
+            j = where[idx]
+        diff = (self.d[j][:, None] - self.d[self.origin][None, :]) - self.mu[None, :]
+        diff[diff == 0.0] = np.finfo(float).tiny
+        return self.w[j][:, None] * (self.C[None, :] / diff)
+
+    @property
+    def U(self) -> np.ndarray:
+        """The eigenvectors as one (modes + 1)^2 matrix, formed on demand (small systems, tests)."""
+        if self.dense is not None:
+            return self.dense
+        return self.expand(np.eye(len(self.p)))
 
 
-def _system(p, U, bU, mass_diag, omega, phi, k, R) -> LinearSystem:
-    return LinearSystem(p, U, bU, mass_diag, omega, phi, float(k), R, U[0].copy(), phi @ U[1:])
+def _cauchy_blocks(d: np.ndarray, origin: np.ndarray, mu: np.ndarray):
+    """The kernel 1 / (d_j - lam_k) of a rank-one path's eigenvectors, a block of columns k at a time (slice, [rows,
+    block]; at most `_BLOCK_ENTRIES` entries), d_j - lam_k formed as (d_j - d_origin) - mu like the roots themselves
+    (full relative accuracy; an exact pole hit, impossible with beta2 > 0, kept finite as `_secular` does)."""
+    n1 = len(d)
+    block = max(1, int(_BLOCK_ENTRIES // max(n1, 1)))
+    for c0 in range(0, n1, block):
+        sl = slice(c0, min(c0 + block, n1))
+        diff = (d[:, None] - d[origin[sl]][None, :]) - mu[sl][None, :]
+        diff[diff == 0.0] = np.finfo(float).tiny
+        np.divide(1.0, diff, out=diff)
+        yield sl, diff
 
 
 def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
@@ -91,23 +179,25 @@ def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     order = np.argsort(d)
     ds = d[order]
     if len(ds) > 1 and np.any(np.diff(ds) <= 1e-12 * ds[1:]):
-        # repeated frequencies: the rank-one structure is degenerate; dense solver
+        # repeated frequencies: the rank-one structure is degenerate; dense solver, U kept whole (O(modes^2): symmetric
+        # plates' pairs; a deflation of each repeated group to one coupled vector would make it O(modes) too)
         lam, V = linalg.eigh(np.diag(d) + ks * np.outer(bt, bt))
         if np.any(lam <= 0):
             raise ImpactvalError("linear theory: the contact system is not positive definite (check k and modes).")
         U = V / sq[:, None]
-        return _system(np.sqrt(lam), U, (b @ U) / (1.0 + k * R), mass_diag, omega, phi, k, R)
-    lam, V, bv = _secular(ds, bt[order] ** 2, ks)
-    # signs restored and mass scaling undone in place (the rows in ascending d, usually the modes' own order): one
-    # (modes + 1)^2 matrix at a time (7,425 modes: 441 MB each; three copies made solve_linear peak at 1.6 GB)
-    V *= (np.sign(bt[order]) / sq[order])[:, None]
-    if np.array_equal(order, np.arange(len(order))):
-        U = V                                 # M-orthonormal: U^T M U = I
-    else:
-        U = np.empty_like(V)
-        U[order] = V
-        del V
-    return _system(np.sqrt(lam), U, bv / (1.0 + k * R), mass_diag, omega, phi, k, R)
+        return LinearSystem(np.sqrt(lam), (b @ U) / (1.0 + k * R), mass_diag, omega, phi, float(k), R,
+                            U[0].copy(), phi @ U[1:], dense=U)
+    # rank-one path: O(modes) numbers kept, U applied as a Cauchy-like kernel (see LinearSystem); U[:, k] =
+    # (sign(bt)/sq)[order] * V[:, k] with V from the secular equation, rows unsorted by `order`
+    w = (np.sign(bt) / sq)[order] * np.sqrt(bt[order] ** 2)
+    e = np.zeros((len(d), 2))
+    e[0, 0] = 1.0                             # x1 = z[0]
+    e[1:, 1] = phi                            # x2 = phi^T z[1:]
+    ident = np.array_equal(order, np.arange(len(order)))
+    lam, origin, mu, C, rows = _secular_parts(ds, bt[order] ** 2, ks, e[order] * (np.sign(bt) / sq)[order][:, None])
+    return LinearSystem(np.sqrt(lam), (-C / ks) / (1.0 + k * R), mass_diag, omega, phi, float(k), R,
+                        rows[:, 0].copy(), rows[:, 1].copy(), order=None if ident else order, d=ds, origin=origin,
+                        mu=mu, C=C, w=w)
 
 
 def _secular(d: np.ndarray, beta2: np.ndarray, ks: float):
@@ -119,14 +209,30 @@ def _secular(d: np.ndarray, beta2: np.ndarray, ks: float):
     accuracy. Eigenvectors v_j = C b_j/(d_j - lam) (for |b| components; signs restored by the caller),
     C = 1/sqrt(sum beta2/(d - lam)^2), and b.v = -C/ks exactly. A dense eigh loses absolute accuracy
     ~ eps * max(d) in the low eigenvalues, which matters with thousands of beam modes; this does not.
-    Returns (lam, V with |b| instead of b, b.v).
+    Returns (lam, V with |b| instead of b, b.v): V whole, O(n^2) (tests, small systems; `linear_system` keeps
+    `_secular_parts`' O(n) description instead).
     """
+    lam, origin, mu, C, _ = _secular_parts(d, beta2, ks)
+    V = np.empty((len(d), len(d)))
+    sb = np.sqrt(beta2)
+    for sl, inv in _cauchy_blocks(d, origin, mu):
+        V[:, sl] = (sb[:, None] * inv) * C[sl]
+    return lam, V, -C / ks
+
+
+def _secular_parts(d: np.ndarray, beta2: np.ndarray, ks: float, Y: np.ndarray | None = None):
+    """`_secular`'s eigenpairs as O(n) numbers: (lam, origin, mu, C, V^T Y) with lam = d[origin] + mu and
+    V[j, k] = C_k sqrt(beta2_j) / ((d_j - d[origin_k]) - mu_k); V^T Y (Y [n, r], None for none) made from the same
+    blocks of the kernel as C (no second pass)."""
     n1 = len(d)
     hi_gap = np.append(np.diff(d), ks * float(np.sum(beta2)))    # last root in (d_n, d_n + ks |b|^2]
     out_lam = np.empty(n1)
-    V = np.empty((n1, n1))
-    bv = np.empty(n1)
-    chunk = max(1, int(4e6 // n1))
+    out_origin = np.empty(n1, dtype=np.intp)
+    out_mu = np.empty(n1)
+    out_C = np.empty(n1)
+    sb = np.sqrt(beta2)
+    proj = None if Y is None else np.empty((n1, Y.shape[1]))
+    chunk = max(1, int(_BLOCK_ENTRIES // n1))     # roots a block: a few [n1, chunk] arrays at a time
     for c0 in range(0, n1, chunk):
         ks_ = np.arange(c0, min(c0 + chunk, n1))
         gap = hi_gap[ks_]
@@ -146,14 +252,17 @@ def _secular(d: np.ndarray, beta2: np.ndarray, ks: float):
         _, diff = g(origin, mu)
         # guard against an exact hit of a pole (cannot happen with beta2 > 0, but keep finite)
         diff = np.where(diff == 0.0, np.finfo(float).tiny, diff)
-        Vc = np.sqrt(beta2)[:, None] / diff
+        Vc = sb[:, None] / diff
         C = 1.0 / np.sqrt(np.sum(Vc**2, axis=0))
-        V[:, ks_] = Vc * C
-        bv[ks_] = -C / ks
+        if proj is not None:
+            proj[ks_] = (Y.T @ Vc).T * C[:, None]
+        out_C[ks_] = C
+        out_origin[ks_] = origin
+        out_mu[ks_] = mu
         out_lam[ks_] = d[origin] + mu
     if np.any(out_lam <= 0):
         raise ImpactvalError("linear theory: the contact system is not positive definite (check k and modes).")
-    return out_lam, V, bv
+    return out_lam, out_origin, out_mu, out_C, proj
 
 
 #: most Newton-or-bisection iterations per secular root (bisection alone needs ~52 from a half gap to roundoff, up to
@@ -225,17 +334,16 @@ def _sines(p: np.ndarray, tau, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _phase(sysm: LinearSystem, t0: float, z0: np.ndarray, zd0: np.ndarray) -> _Phase:
-    c = sysm.U.T @ (sysm.mass_diag * z0)
-    s = sysm.U.T @ (sysm.mass_diag * zd0) / sysm.p
+    cs = sysm.project(np.column_stack((sysm.mass_diag * z0, sysm.mass_diag * zd0)))
+    c, s = cs[:, 0].copy(), cs[:, 1] / sysm.p
     return _Phase(t0, sysm.bU * c, sysm.bU * s, c, s)
 
 
 def _state(sysm: LinearSystem, ph: _Phase, tau: float) -> tuple[np.ndarray, np.ndarray]:
     """z, z' at t0 + tau in a contact phase."""
     cp, sp = np.cos(sysm.p * tau), np.sin(sysm.p * tau)
-    z = sysm.U @ (ph.c * cp + ph.s * sp)
-    zd = sysm.U @ (sysm.p * (ph.s * cp - ph.c * sp))
-    return z, zd
+    zz = sysm.expand(np.column_stack((ph.c * cp + ph.s * sp, sysm.p * (ph.s * cp - ph.c * sp))))
+    return zz[:, 0].copy(), zz[:, 1].copy()
 
 
 def _sines_grid(p: np.ndarray, t0: float, h: float, count: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -394,13 +502,15 @@ def solve_linear_modes(modes: Modes, mass: float, k: float, v0: float, window: f
         # phases (the flights' totals are in the modes' own coordinates), i.e. U's M-orthonormality
         e_phase = 0.5 * float(np.sum(sysm.p**2 * (ph.c**2 + ph.s**2)))
         series.append((t_now + tau, x1s, x2s, us, np.full(len(tau), e_phase), np.ones(len(tau), bool)))
-        z, zd = _state(sysm, ph, end)
         t_now += end
         if len(contacts) == 1:
-            rebound = -zd[0]
+            # the ball's velocity from row 0 of U (O(modes)); the whole state (`_state`) only if the solution goes on
+            cp, sp = np.cos(sysm.p * end), np.sin(sysm.p * end)
+            rebound = -float(sysm.x1_row @ (sysm.p * (ph.s * cp - ph.c * sp)))
             t_stop = t_now + window
         if t_now >= t_stop:
             break
+        z, zd = _state(sysm, ph, end)
         # free flight: x1 = x1_0 + u tau; q_i = q_i0 cos(w tau) + qd_i0 sin(w tau)/w
         x10, u, q0, qd0 = z[0], zd[0], z[1:], zd[1:]
         w = sysm.omega

@@ -308,3 +308,95 @@ def test_theory_page_shows_the_exact_solutions_warnings(monkeypatch, tmp_path):
     assert any(model == "linear" and "above tol 1e-09" in text for model, text in cmp.warnings)
     text = path.read_text()
     assert "Warnings of the exact solutions:" in text and "- linear: uncertainty" in text
+
+
+def _random_modes(rng, n, residual=0.0):
+    """n modes with distinct random frequencies in random order (the rank-one path unsorts its rows)."""
+    from impactval.reference.beams import Modes
+
+    omega = rng.permutation(np.sqrt(np.sort(rng.uniform(1e2, 1e10, n))))
+    phi = rng.uniform(-2.0, 2.0, n) + np.where(rng.random(n) < 0.5, 0.05, -0.05)      # |phi| >= 0.05: kept
+    return Modes(omega, rng.uniform(0.01, 2.0, n), phi, residual)
+
+
+def test_rank_one_eigenvectors_are_applied_without_forming_them():
+    """The rank-one path keeps U as O(modes) numbers (a Cauchy-like kernel) and applies it a block of columns at a
+    time: U^T Y, U X and rows of U against U formed explicitly from `_secular` (the formula U was stored from: V scaled
+    by sign(b)/sqrt(m), rows unsorted) and against a dense generalised eigh of (K, M), on a small random system with
+    blocks forced small."""
+    from scipy import linalg
+
+    from impactval.reference import linear
+
+    rng = np.random.default_rng(2024)
+    n, mass, k = 37, 0.05, 3e7
+    md = _random_modes(rng, n, residual=2e-9)
+    old = linear._BLOCK_ENTRIES
+    linear._BLOCK_ENTRIES = 5 * (n + 1) + 1         # blocks of 5 columns: the stitching is exercised
+    try:
+        sysm = linear.linear_system(md, mass, k)
+        assert sysm.dense is None and sysm.order is not None
+        Y, X = rng.normal(size=(n + 1, 3)), rng.normal(size=(n + 1, 2))
+        got_T, got, got_1 = sysm.project(Y), sysm.expand(X), sysm.project(Y[:, 0])
+        few = np.zeros(n + 1)
+        few[[0, 5]] = (1.3, -0.4)                    # few nonzero rows: from those rows of U only
+        got_few = sysm.project(few)
+        U = sysm.U
+    finally:
+        linear._BLOCK_ENTRIES = old
+    ks = k / (1.0 + k * md.residual_flexibility)
+    b = np.concatenate(([1.0], -md.phi))
+    m = np.concatenate(([mass], md.modal_mass))
+    d = np.concatenate(([0.0], md.omega**2))
+    order = np.argsort(d)
+    bt = b / np.sqrt(m)
+    lam, V, bv = linear._secular(d[order], bt[order] ** 2, ks)
+    ref = np.empty_like(V)
+    ref[order] = V * (np.sign(bt[order]) / np.sqrt(m[order]))[:, None]
+    scale = np.max(np.abs(ref))
+    assert np.allclose(sysm.p**2, lam, rtol=1e-15)
+    assert np.max(np.abs(U - ref)) <= 1e-14 * scale
+    for a, r in ((got_T, ref.T @ Y), (got_1, ref.T @ Y[:, 0]), (got, ref @ X), (got_few, ref.T @ few)):
+        assert np.max(np.abs(a - r)) <= 1e-13 * np.max(np.abs(r))
+    assert np.allclose(sysm.x1_row, ref[0], rtol=1e-14, atol=1e-15 * scale)
+    assert np.allclose(sysm.x2_row, md.phi @ ref[1:], rtol=1e-12, atol=1e-14 * np.max(np.abs(sysm.x2_row)))
+    assert np.allclose(sysm.bU, (b @ ref) / (1.0 + k * md.residual_flexibility), rtol=1e-10,
+                       atol=1e-12 * np.max(np.abs(sysm.bU)))
+    # a dense generalised eigh of (K, M): the same frequencies and (up to each column's sign) vectors
+    K = ks * np.outer(b, b) + np.diag(m * d)
+    lam_e, U_e = linalg.eigh(K, np.diag(m))
+    srt = np.argsort(sysm.p)
+    assert np.allclose(sysm.p[srt] ** 2, lam_e, rtol=1e-9)
+    U_e *= np.sign(np.sum(U_e * U[:, srt], axis=0))
+    assert np.allclose(U[:, srt], U_e, rtol=0, atol=1e-8 * scale)
+
+
+def test_rank_one_system_keeps_no_square_matrix():
+    """2,000 modes: every array kept on the LinearSystem is 1-D of length <= modes + 1 (U was (modes + 1)^2: 441 MB
+    at 7,425 modes), and U U^T M = I through `expand`/`project` alone."""
+    from impactval.reference import linear
+
+    rng = np.random.default_rng(5)
+    n = 2000
+    sysm = linear.linear_system(_random_modes(rng, n, residual=1e-9), 0.03, 5e7)
+    arrays = {f: getattr(sysm, f) for f in sysm.__dataclass_fields__ if isinstance(getattr(sysm, f), np.ndarray)}
+    assert sysm.dense is None and len(arrays) >= 8
+    for name, a in arrays.items():
+        assert a.ndim == 1 and len(a) <= n + 1, name
+    y = rng.normal(size=(n + 1, 2))
+    back = sysm.expand(sysm.project(sysm.mass_diag[:, None] * y))
+    assert np.max(np.abs(back - y)) <= 1e-10 * np.max(np.abs(y))
+
+
+def test_repeated_frequencies_keep_the_dense_eigenvectors():
+    """Repeated frequencies (a square plate's pairs) take the dense eigh path, whose U is kept whole; its products
+    are U's own."""
+    from impactval.reference import linear
+    from impactval.reference.beams import Modes
+
+    md = Modes(np.array([1e3, 2e3, 2e3, 5e3]), np.array([0.1, 0.2, 0.2, 0.3]), np.array([0.9, 0.5, -0.7, 0.2]))
+    sysm = linear.linear_system(md, 0.02, 1e6)
+    assert sysm.dense is not None and sysm.U is sysm.dense
+    y = np.arange(5.0)
+    assert np.allclose(sysm.project(y), sysm.dense.T @ y) and np.allclose(sysm.expand(y), sysm.dense @ y)
+    assert np.allclose(sysm.U.T @ np.diag(sysm.mass_diag) @ sysm.U, np.eye(5), atol=1e-12)
