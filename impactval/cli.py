@@ -170,13 +170,21 @@ def _explain(sc, tol: float) -> None:
                    else "  rigid plate: no structure modes")
         return
     e = c.structure_effect
-    click.echo(f"  structure effect (first order): t_m {100 * e.t_m:+.3f} %, f_m {100 * e.f_m:+.3f} %, "
-               f"delta_m {100 * e.delta_m:+.3f} %; rigid plate enough at tol {c.tol:g}: "
-               f"{'yes' if c.rigid_plate_enough else 'no'}")
     from impactval.reference.validity import perturbation_validity
 
-    for warning in perturbation_validity(e.t_m, e.delta_m)[0]:
-        click.echo(f"  ! structure effect and mode weights are first-order: {warning.split(': ', 1)[1]}")
+    # the rule --model perturbation uses: a first-order shift <= -100 % has no first-order answer (n/a)
+    warnings, usable = perturbation_validity(e.t_m, e.delta_m)
+    enough = f"rigid plate enough at tol {c.tol:g}: {'yes' if c.rigid_plate_enough else 'no'}"
+    if not usable:
+        reason = warnings[0].split(": ", 1)[1]
+        click.echo(f"  structure effect (first order): n/a ({reason}); {enough}")
+        click.echo("  ! the mode weights and the first-order mode count below come from the same expansion: "
+                   "a rough guide only here")
+    else:
+        click.echo(f"  structure effect (first order): t_m {100 * e.t_m:+.3f} %, f_m {100 * e.f_m:+.3f} %, "
+                   f"delta_m {100 * e.delta_m:+.3f} %; {enough}")
+        for warning in warnings:
+            click.echo(f"  ! structure effect and mode weights are first-order: {warning.split(': ', 1)[1]}")
     click.echo(f"  modes needed (first-order weights, a-priori, safety factor {1 / SAFETY:g}): "
                f"{'at least ' if c.count_capped else ''}{c.count} with the residual "
                f"static flexibility, {'at least ' if c.plain_count_capped else ''}{c.count_without_residual} "

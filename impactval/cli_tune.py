@@ -144,18 +144,22 @@ def _once_noting(make_progress):
 
 def _evaluation_line(objective, options: dict, residuals, max_nfev: int | None = None) -> str:
     """One line on a fit evaluation just done: its number (of at most max_nfev, the Jacobian's steps not counted
-    by least_squares' budget), the options tried, the largest |error| over the speeds in % and the work so far."""
+    by least_squares' budget), the options tried, the largest |error| of the metrics the objective fits
+    (`objective.quantities`, e.g. t_m and f_m: "largest fitted |error| (t_m, f_m)") over the speeds in % and the work
+    so far."""
     import numpy as np
 
     r = objective.record
     worst = float(np.max(np.abs(residuals))) if len(residuals) else math.nan
+    fitted = ", ".join(getattr(objective, "quantities", ()) or ())
+    what = f"largest fitted |error| ({fitted})" if fitted else "largest |error|"
     opts = ", ".join(f"{k}={v}" for k, v in options.items())
     if getattr(objective, "phase", "fit") == "scan":
         of = " (scanning the spring before the fit)"
     else:
         of = f" (budget {max_nfev} + Jacobian steps)" if max_nfev else ""
-    return (f"evaluation {r.evaluations}{of}: {opts}: largest |error| {100 * worst:.3g} % over {len(objective.speeds)} "
-            f"speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
+    return (f"evaluation {r.evaluations}{of}: {opts}: {what} {100 * worst:.3g} % over "
+            f"{len(objective.speeds)} speeds; {r.engine_runs} engine runs, {r.jobs_reused} reused")
 
 
 def _console(data) -> str:

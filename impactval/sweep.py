@@ -51,6 +51,9 @@ ORDER_MIN_POINTS = 5
 ORDER_RESIDUAL_FACTOR = 1.15
 #: refining dt "stops helping" once the score is within this fraction of the finest-dt score
 FLOOR_FRACTION = 0.1
+#: an error within this fraction of the engine's own |model_error| estimate is the structure floor (refining dt
+#: cannot lower it), whether or not the grid shows the error level off
+FLOOR_MODEL_MATCH = 0.05
 #: unit roundoff of the arithmetic each engine steps in (float32 GPU-style engines, else float64)
 PRECISION = {"mujoco-warp": float(np.finfo(np.float32).eps), "newton": float(np.finfo(np.float32).eps)}
 _DOUBLE_EPS = float(np.finfo(np.float64).eps)
@@ -534,6 +537,9 @@ def floors(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> pd.Da
     structure discretisation (the engine's own `model_error`, other segment counts at the same dt,
     or by elimination on a chain), contact law (native linear contact vs Hertz: error against
     linear theory much smaller), the reference tolerance, or float precision.
+    With fewer than 2 stable steps there is no trend (cause "one stable step ..."); an error within
+    FLOOR_MODEL_MATCH of the engine's own |model_error| is named the structure floor even when the grid does
+    not show it level off (checked before "no floor").
     """
     d = with_score(df)
     rows = []
@@ -558,7 +564,8 @@ def floors(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) -> pd.Da
 
 def _cause_kind(cause: str) -> str:
     """The first cause named in a floor's text, as a short label."""
-    for kind in ("no floor", "reference", "float precision", "structure discretisation", "contact law"):
+    for kind in ("no floor", "one stable step", "reference", "float precision", "structure discretisation",
+                 "contact law"):
         if cause.startswith(kind) or cause.startswith("the " + kind):
             return kind
     return "not identified"
@@ -566,6 +573,14 @@ def _cause_kind(cause: str) -> str:
 
 def _floor_cause(d: pd.DataFrame, g: pd.DataFrame, fine: pd.Series, floor: float, reached: bool, kind: str) -> str:
     if not reached:
+        one = len(g) < 2
+        at_model = _model_error_floor(fine, floor)
+        if at_model:
+            return at_model + ("; one stable step in this grid cannot show a trend in dt" if one else
+                               "; the grid does not show the error level off yet")
+        if one:
+            return ("one stable step in this grid: it cannot show a trend in dt (step at least two stable dt, "
+                    "below the stability limit, to find a floor)")
         return "no floor in this grid: the error still falls at the finest step (refine dt further)"
     causes = []
     ref_u = pd.to_numeric(fine.get("ref_uncertainty", math.nan), errors="coerce")
@@ -601,6 +616,16 @@ def _floor_cause(d: pd.DataFrame, g: pd.DataFrame, fine: pd.Series, floor: float
     return "; ".join(causes) or "not identified"
 
 
+def _model_error_floor(fine: pd.Series, floor: float) -> str:
+    """The structure-floor text when the finest step's error is within FLOOR_MODEL_MATCH of the engine's own
+    |model_error| estimate (refining dt cannot lower an error the structure sets), else ""."""
+    model_err = abs(pd.to_numeric(fine.get("model_error", math.nan), errors="coerce"))
+    if not (math.isfinite(model_err) and model_err > 0 and abs(floor - model_err) <= FLOOR_MODEL_MATCH * model_err):
+        return ""
+    return (f"structure discretisation: the error ({100 * floor:.3g} %) is the engine's own model-error estimate "
+            f"({100 * model_err:.3g} % for N = {fine['segments'] or 'default'}): refining dt will not lower it")
+
+
 
 
 def refused_before_stepping(df: pd.DataFrame) -> pd.Series:
@@ -626,8 +651,10 @@ def status_counts(df: pd.DataFrame) -> dict[str, int]:
 def stability(df: pd.DataFrame) -> pd.DataFrame:
     """Observed stability limit per series next to the predicted one.
 
-    `dt_stable_max`: the largest dt that ran ok below the smallest unstable dt; `dt_limit_observed`:
-    the smallest dt whose cell is "unstable", stepped or refused (NaN: none in the grid);
+    `dt_stable_max`: the largest dt that ran ok below the smallest unstable dt (stepped or refused);
+    `dt_limit_observed`: the smallest dt whose cell is "unstable", stepped or refused, but only when some
+    cell at or above it was stepped and went unstable (NaN otherwise: a series whose only unstable cells were
+    refused before stepping observed no limit; the column keeps its name for older readers);
     `dt_unstable_stepped`: the smallest dt that was stepped and went unstable (NaN: none), the only
     observation of the real limit; `dt_refused_min`: the smallest dt refused before stepping because it
     is above the predicted limit (NaN: none; such a cell says nothing about the real limit);
@@ -648,7 +675,7 @@ def stability(df: pd.DataFrame) -> pd.DataFrame:
         below = okdt[okdt < lim] if math.isfinite(lim) else okdt
         pred = pd.to_numeric(g["dt_limit"], errors="coerce") if "dt_limit" in g else pd.Series(dtype=float)
         rows.append(dict(zip(SERIES, key), dt_stable_max=float(below.max()) if len(below) else math.nan,
-                         dt_limit_observed=lim,
+                         dt_limit_observed=lim if (stepped >= lim).any() else math.nan,
                          dt_unstable_stepped=float(stepped.min()) if len(stepped) else math.nan,
                          dt_refused_min=float(refused_dt.min()) if len(refused_dt) else math.nan,
                          dt_limit_predicted=float(pred.min()) if pred.notna().any() else math.nan,
@@ -662,9 +689,9 @@ def orders_table(df: pd.DataFrame, scene_kinds: dict[str, str] | None = None) ->
     """DIR/orders.csv: fitted orders (per metric) with the observed and predicted stability limits
     of their series. Columns: scene, engine, integrator, order, dt_min, dt_max, dt_limit_observed,
     dt_limit_predicted, then contact, segments, metric, nominal_order, n_points, scatter, clean,
-    explanation, dt_unstable_stepped, dt_refused_min (see `stability`: dt_limit_observed counts cells refused
-    before stepping too; dt_unstable_stepped only the stepped ones), slope_spread (largest |local slope - order|:
-    beyond ORDER_SLOPE_SCATTER_NONE an envelope is no observed order)."""
+    explanation, dt_unstable_stepped, dt_refused_min (see `stability`: dt_limit_observed is NaN unless a
+    cell at or above it was stepped and went unstable; dt_unstable_stepped counts only the stepped ones),
+    slope_spread (largest |local slope - order|: beyond ORDER_SLOPE_SCATTER_NONE an envelope is no observed order)."""
     o = fit_orders(df, scene_kinds)
     s = stability(df)
     m = o.merge(s, on=list(SERIES), how="left")

@@ -243,6 +243,44 @@ def _pct(x: Any) -> str:
     return f"{100 * x:+.3g}" if math.isfinite(x) else ""
 
 
+def _axis_value(axis, v: Any) -> str:
+    """`velocity = 100 m/s`, `stiffness = steel`."""
+    unit = f" {axis.unit}" if axis.unit and isinstance(v, (int, float, np.number)) else ""
+    return f"{axis.name} = {_fmt(v)}{unit}"
+
+
+def _validity_by_cell(df: pd.DataFrame, axes) -> list[str]:
+    """The reference's warnings (`ref_validity`), each once, prefixed with the cells it belongs to: their values on
+    the axes that change the scene (every axis but dt), e.g. "velocity = 100 m/s: Hertz: ..."; with no such axis,
+    the scene's name. In the axes' order."""
+    if "ref_validity" not in df:
+        return []
+    scene_axes = [a for a in axes if a.name != "dt" and a.name in df]
+    where: dict[str, list[tuple]] = {}
+    for _, r in df.iterrows():
+        w = r["ref_validity"]
+        if not isinstance(w, str) or not w:
+            continue
+        coords = tuple(r[a.name] for a in scene_axes) if scene_axes else (r.get("scene", ""),)
+        if coords not in where.setdefault(w, []):
+            where[w].append(coords)
+
+    def rank(coords: tuple) -> tuple:
+        if not scene_axes:
+            return ()
+        return tuple(list(a.values).index(v) if v in a.values else len(a.values) for a, v in zip(scene_axes, coords))
+
+    out = []
+    for w, cells in sorted(where.items(), key=lambda kv: (min(rank(c) for c in kv[1]), kv[0])):
+        cells = sorted(cells, key=rank)
+        if scene_axes:
+            label = "; ".join(", ".join(_axis_value(a, v) for a, v in zip(scene_axes, c)) for c in cells)
+        else:
+            label = ", ".join(str(c[0]) for c in cells)
+        out.append(f"{label}: {w}")
+    return out
+
+
 def markdown(df: pd.DataFrame, png: str | None = None, predict: pd.DataFrame | None = None) -> str:
     """extremes.md: the safe region in words, the dt onsets against the predictions, the figure, the
     cell table and the predictability check."""
@@ -281,7 +319,7 @@ def markdown(df: pd.DataFrame, png: str | None = None, predict: pd.DataFrame | N
                    f"{_fmt(r.get('dt'))} | {_fmt(r.get('limit_ratio'))} | {_fmt(r.get('tunnel_ratio'))} | "
                    f"{'' if not isinstance(unc, float) or not math.isfinite(unc) else f'{unc:.1e}'} | "
                    f"{msg.replace('|', '/')} |")
-    warn = sorted({str(w) for w in df.get("ref_validity", pd.Series(dtype=str)).dropna() if str(w)})
+    warn = _validity_by_cell(df, axes)
     tol = df.attrs.get("tol")
     if tol and "ref_uncertainty" in df:
         unc = pd.to_numeric(df.drop_duplicates("scene")["ref_uncertainty"], errors="coerce")

@@ -119,8 +119,15 @@ def sweep_markdown(df: pd.DataFrame, unders: list[float], scene_kinds: dict[str,
                 sizes = ", ".join(f"{_pct(r['floor'])} % at {_g(r['dt_finest'])} s" for _, r in fg.iterrows())
                 out.append(f"- **Floor**, {integ}: not reached in this grid ({sizes}; still falling: refine dt).")
                 continue
+            if kind == "one stable step":
+                sizes = ", ".join((f"N = {r['segments']}: " if r["segments"] else "") +
+                                  f"{_pct(r['floor'])} % at {_g(r['dt_finest'])} s" for _, r in fg.iterrows())
+                out.append(f"- **Floor**, {integ}: not known ({sizes}): one stable step in this grid cannot show a "
+                           f"trend in dt; step at least two stable dt (below the stability limit) to find a floor.")
+                continue
             sizes = ", ".join((f"N = {r['segments']}: " if r["segments"] else "") +
-                              f"{_pct(r['floor'])} % from dt <= {_g(r['dt_floor'])} s" for _, r in fg.iterrows())
+                              (f"{_pct(r['floor'])} % from dt <= {_g(r['dt_floor'])} s" if r["reached"] else
+                               f"{_pct(r['floor'])} % at {_g(r['dt_finest'])} s") for _, r in fg.iterrows())
             detail = fg["cause"].iloc[0] if len(fg) == 1 else _FLOOR_WORDS.get(kind, fg["cause"].iloc[0])
             if len(fg) > 1 and fg["cause"].str.contains("own model-error estimate").all():
                 detail = ("structure discretisation: each floor matches the engine's own model-error estimate "

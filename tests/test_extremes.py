@@ -241,7 +241,7 @@ def test_report_names_a_loose_reference():
     df.attrs.update(axes=[Axis("velocity", (1.0, 2.0), "m/s")], under=0.01, tol=1e-6, scene="s", engines=["e"])
     md = markdown(df)
     assert "s[v=2]: reference uncertainty 0.05" in md and "s[v=1]: reference" not in md
-    assert "- delta_m/R = 0.2" in md
+    assert "- velocity = 2 m/s: delta_m/R = 0.2" in md           # the cell it belongs to (s20 finding 7)
     assert "e: ok (all errors under 1 %) for velocity in [1, 2] m/s." in md
 
 

@@ -627,7 +627,8 @@ def test_stability_report_tells_cells_refused_before_stepping_from_stepped_ones(
     st = sw.stability(_stab_rows()).set_index("segments")
     assert math.isnan(st.loc["41", "dt_unstable_stepped"]) and st.loc["41", "dt_refused_min"] == 1e-6
     assert st.loc["81", "dt_unstable_stepped"] == 1e-6 and math.isnan(st.loc["81", "dt_refused_min"])
-    assert st.loc["41", "dt_limit_observed"] == 1e-6          # unchanged: the smallest unstable dt of either kind
+    # s20 finding 9: only refused cells above the limit: nothing observed, the column is empty (it held 1e-6)
+    assert math.isnan(st.loc["41", "dt_limit_observed"]) and st.loc["81", "dt_limit_observed"] == 1e-6
 
 
 def test_sweep_interrupted_before_any_cell_points_to_a_report_that_exists(tmp_path, monkeypatch):

@@ -127,7 +127,8 @@ def test_a_refused_row_names_its_limit_on_the_terminal_and_joins_its_series():
     assert skipped_line.endswith("skipped") and refused_line.endswith("unstable")   # no 0.0 ms / 0 steps
     st = stability(pd.DataFrame(rows[:2]))
     assert len(st) == 1, st                            # one series, N = 41 (was two: "default" and 41)
-    assert st["dt_stable_max"].iloc[0] == 2e-7 and st["dt_limit_observed"].iloc[0] == 1e-6
+    assert st["dt_stable_max"].iloc[0] == 2e-7 and st["dt_refused_min"].iloc[0] == 1e-6
+    assert math.isnan(st["dt_limit_observed"].iloc[0])       # refused, never stepped: no observed limit (s20)
     assert 2e-7 < st["dt_limit_predicted"].iloc[0] < 1e-6
 
 
