@@ -33,7 +33,8 @@ alone) only U's row 0. Measured on tests/data/plate_thousands_of_modes.toml (`so
 take 135 MB), the same time within this shared machine's noise (26 s vs 23 s wall; interleaved, linear_system at
 7,424 modes took 5-12 s either way) and the same metrics to the last bit. On catalogue and random beams and plates
 the results equal the stored-U solution's within 4e-16 (metrics) and 3e-13 (series over nine re-contacts).
-Repeated frequencies take a dense eigh and keep U, O(modes^2).
+Repeated frequencies are merged first (`merge_repeated_modes`: exact for the contact); only a mode of zero frequency
+(the ball's own pole) still takes a dense eigh and keeps U, O(modes^2).
 """
 from __future__ import annotations
 
@@ -72,8 +73,8 @@ class LinearSystem:
     U[order[j], k] = w_j C_k / ((d_j - d_origin_k) - mu_k) (a Cauchy-like matrix: `d` the sorted d = (0, omega^2),
     `w` = sign(b_j) |b_j| / m_j in that order, lam_k = d_origin_k + mu_k), so the system keeps O(modes) numbers
     and `project`/`expand` form the kernel a block of columns at a time (`_BLOCK_ENTRIES`), each d_j - lam_k in
-    the same full-relative-accuracy form as the roots (7,425 modes: U was 441 MB). Repeated frequencies (the
-    dense path, `linalg.eigh`): `dense` holds U, O(modes^2).
+    the same full-relative-accuracy form as the roots (7,425 modes: U was 441 MB). Repeated poles left after
+    `merge_repeated_modes` (a zero-frequency mode; the dense path, `linalg.eigh`): `dense` holds U, O(modes^2).
     """
 
     p: np.ndarray
@@ -161,6 +162,37 @@ def _cauchy_blocks(d: np.ndarray, origin: np.ndarray, mu: np.ndarray):
         yield sl, diff
 
 
+#: modes whose squared frequencies differ by at most this fraction are one frequency (the secular equation's poles
+#: must be distinct; `merge_repeated_modes`)
+REPEATED = 1e-12
+
+
+def merge_repeated_modes(omega: np.ndarray, phi: np.ndarray, modal_mass: np.ndarray):
+    """(omega, phi, modal_mass) with each group of modes of one frequency (squared frequencies within REPEATED) made one
+    mode of that frequency with phi = 1 and 1 / modal_mass = sum phi_i^2 / m_i: the contact point's displacement
+    sum phi_i q_i of the group obeys (d^2/dt^2 + omega^2) x = (sum phi_i^2 / m_i) f, one mode's equation, and the
+    group's other combinations are never excited (the only force acts through the contact point, from rest), so
+    the impact, its re-contacts and x2 are exactly those of the merged mode. Plates of a rational aspect ratio
+    have such pairs (0.33 x 0.21 m, 11:7): their 4,096-mode linear solve took a dense eigh, O(modes^3) (45 s), not
+    the secular equation's O(modes^2). Groups of one stay as they are (same arrays, same order)."""
+    if len(omega) < 2:
+        return omega, phi, modal_mass
+    d = omega**2
+    order = np.argsort(d)
+    ds = d[order]
+    same = np.diff(ds) <= REPEATED * ds[1:]
+    if not np.any(same):
+        return omega, phi, modal_mass
+    starts = np.flatnonzero(np.concatenate(([True], ~same)))      # first member of each group (sorted order)
+    g = (phi**2 / modal_mass)[order]
+    g_sum = np.add.reduceat(g, starts)
+    sizes = np.diff(np.append(starts, len(ds)))
+    first = order[starts]
+    new_phi = np.where(sizes > 1, 1.0, phi[first])
+    new_m = np.where(sizes > 1, 1.0 / g_sum, modal_mass[first])
+    return omega[first], new_phi, new_m
+
+
 def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     """Build and diagonalise the ball + modes system in contact (spring `k` [N/m], ball `mass` [kg])."""
     # modes with |phi| <= 1e-8 at the impact point (nodes, e.g. even modes at mid-span, up to rounding)
@@ -169,6 +201,7 @@ def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     omega = np.asarray(modes.omega, float)[keep]
     phi = np.asarray(modes.phi, float)[keep]
     mm = np.asarray(modes.modal_mass, float)[keep]
+    omega, phi, mm = merge_repeated_modes(omega, phi, mm)
     R = float(modes.residual_flexibility)
     ks = k / (1.0 + k * R)
     b = np.concatenate(([1.0], -phi))
@@ -179,8 +212,8 @@ def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     order = np.argsort(d)
     ds = d[order]
     if len(ds) > 1 and np.any(np.diff(ds) <= 1e-12 * ds[1:]):
-        # repeated frequencies: the rank-one structure is degenerate; dense solver, U kept whole (O(modes^2): symmetric
-        # plates' pairs; a deflation of each repeated group to one coupled vector would make it O(modes) too)
+        # repeated poles left after merge_repeated_modes (a mode of zero frequency, the ball's own): the rank-one
+        # structure is degenerate; dense solver, U kept whole (O(modes^2))
         lam, V = linalg.eigh(np.diag(d) + ks * np.outer(bt, bt))
         if np.any(lam <= 0):
             raise ImpactvalError("linear theory: the contact system is not positive definite (check k and modes).")
