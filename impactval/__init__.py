@@ -53,9 +53,14 @@ def structure_modes(scene, n=None):
     """The first `n` modes of `scene`'s target seen from the impact point: an object with arrays `omega`
     [rad/s], `modal_mass` [kg, shapes normalised to max 1] and `phi` (shape value at the impact point).
 
-    Rigid plate and ball targets have none; a modal target gives its own (the n lowest); beams (either
-    theory) and plates the n lowest. `n` may be omitted when the scene sets `modes` (or for a modal target).
+    `scene` is a Scene, a catalogue name or a path to a TOML file (as for :func:`solve`). Rigid plate and ball
+    targets have none; a modal target gives its own (the n lowest); beams (either theory) and plates the n lowest.
+    `n` (1 .. 100000) may be omitted when the scene sets `modes` (or for a modal target). Bad arguments raise
+    ImpactvalError naming the argument.
     """
+    from impactval import checks
     from impactval.reference.structure import structure_modes as _modes
+    from impactval.scenarios.scene import load_scene as _load
 
-    return _modes(scene, n)
+    n = checks.check_modes(n, "n")
+    return _modes(_load(scene), n)

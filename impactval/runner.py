@@ -190,14 +190,22 @@ def _structure_size(scene, rs: Mapping[str, Any], settings: EngineSettings, diag
 
 
 def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: ImpactResult, ref: ImpactResult,
-             lin: ImpactResult | None, job_key: str = "", theory: TheoryGap | None = None) -> dict[str, Any]:
+             lin: ImpactResult | None, job_key: str = "", theory: TheoryGap | None = None,
+             reference_gap: Mapping[str, Mapping[str, float]] | None = None) -> dict[str, Any]:
     """One results row (see COLUMNS; errors are signed fractions (engine - reference) / reference).
 
     The error is split per metric into `structure_err_*` (the engine's structure model vs the scene's
     continuum, from the adapter's `model_error_*` diagnostics, measured under the row's contact law: the
     adapter's `model_error_law`) and `numerics_err_*` = err - structure (Hertz laws), lin_err - structure (a
     linear law whose structure part is measured under that spring, against the linear theory; else NaN); `theory_gap_*` (from `theory`, beam scenes) is the other beam theory's reference
-    relative to this one; `vs_mujoco_c_*` is MuJoCo Warp against MuJoCo C on the identical model."""
+    relative to this one; `vs_mujoco_c_*` is MuJoCo Warp against MuJoCo C on the identical model.
+
+    `reference_gap` (a beam or plate scene with an explicit `modes = n`, from `References.reference_gap`): per contact
+    law ("hertz", "linear"), the n-mode reference's departure from the structure's continuum, signed fractions. The
+    adapters size and error-estimate their structures against the continuum (engines/chain.py `continuum_metrics`),
+    the row's error is against the n-mode reference: the structure error becomes the engine's structure against the
+    scene's reference model, (1 + adapter's) / (1 + gap) - 1, so structure + numerics = error holds, and a row note says
+    how much of it is the reference's truncation (reference/explicit_modes.py)."""
     err = relative_errors(res, ref) if res.success else dict.fromkeys(METRICS, math.nan)   # NaN without a reference
     diag = res.diagnostics or {}
     row: dict[str, Any] = dict.fromkeys(COLUMNS, math.nan)
@@ -227,6 +235,13 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         continuum_frequencies=json.dumps(diag["continuum_frequencies"]) if "continuum_frequencies" in diag else "",
     )
     structure = structure_errors(diag)
+    gap_note = ""
+    if reference_gap:
+        gap = reference_gap.get(str(diag.get("model_error_law", "hertz")))
+        if gap:
+            structure = {m: (1.0 + structure[m]) / (1.0 + gap[m]) - 1.0 if math.isfinite(structure[m]) else structure[m]
+                         for m in METRICS}
+        gap_note = str(reference_gap.get("note", "") or "")
     hertz = law.kind == "hertz" if law is not None else settings.contact == "hertz"
     lin_err = dict.fromkeys(METRICS, math.nan)
     if lin is not None and lin.success and res.success:
@@ -268,6 +283,8 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         notes[at:at] = [c for c in cuts if c]
         if not ref.success:
             notes.insert(0, f"{NO_REFERENCE}: {ref.message}")
+        elif gap_note:
+            notes.insert(0, gap_note)
         if notes:
             row["message"] = "; ".join(notes)
     return row
@@ -357,6 +374,9 @@ class References:
         self._ref: dict[tuple, ImpactResult] = {(canonical_scene(sc), tol): r for sc, tol, r in known}
         self._lin: dict[tuple, ImpactResult | None] = {}
         self._theory: dict[tuple, TheoryGap | None] = {}
+        #: scenes with an explicit `modes = n`: the continuum reference (or None when refused) and the linear one
+        self._cont: dict[tuple, ImpactResult | None] = {}
+        self._lin_cont: dict[tuple, ImpactResult | None] = {}
         #: say(line): told of each new solve ("reference NAME (tol 1e-09): solving ...", then "... solved in 14.6 s"):
         #: at tol 1e-9 one solve can take 10-15 s, during which no row waiting for it can be written
         self.say = say
@@ -388,9 +408,15 @@ class References:
             ref = self.ref(job)                 # said on its own first
             theory = getattr(job.scene.target, "theory", "euler-bernoulli")
             other = "timoshenko" if theory == "euler-bernoulli" else "euler-bernoulli"
+            scene, base = job.scene, ref
+            cont = self.continuum(job)
+            if cont is not None:        # an explicit mode count: the theory's effect on the beam the engines model
+                from impactval.reference.explicit_modes import continuum_scene
+
+                scene, base = continuum_scene(job.scene), cont
             self._theory[key] = self._timed(f"reference {job.scene.name}, {other} theory for the beam-theory gap (tol "
                                             f"{max(job.tol, THEORY_GAP_TOL):g})",
-                                            lambda: theory_gap(job.scene, ref, job.tol))
+                                            lambda: theory_gap(scene, base, job.tol))
         return self._theory[key]
 
     def ref(self, job: Job) -> ImpactResult:
@@ -405,8 +431,69 @@ class References:
                     return impactval.solve(job.scene, tol=job.tol)
                 except ImpactvalError as exc:   # refused (e.g. over its node budget): the rows stand, uncompared
                     return ImpactResult.failed(job.scene.name, "reference", "crashed", str(exc))
-            self._ref[key] = self._timed(f"reference {job.scene.name} (tol {job.tol:g})", solve)
+            ref = self._timed(f"reference {job.scene.name} (tol {job.tol:g})", solve)
+            self._ref[key] = self._explicit_modes(job, key, ref)
         return self._ref[key]
+
+    def _explicit_modes(self, job: Job, key: tuple, ref: ImpactResult) -> ImpactResult:
+        """A scene with an explicit `modes = n` (beam, plate): its continuum solved once (`continuum`), and `ref`
+        with a validity warning when the n-mode model is far from it (reference/explicit_modes.py); else `ref`."""
+        from impactval.reference.explicit_modes import continuum_tol, explicit_count, truncation_check, with_warning
+
+        if explicit_count(job.scene) is None or not ref.success or key in self._cont:
+            return ref
+        cont, warning = self._timed(
+            f"reference {job.scene.name} without its modes = {explicit_count(job.scene)}, the continuum the engines "
+            f"model (tol {continuum_tol(job.tol):g})", lambda: truncation_check(job.scene, ref, job.tol))
+        self._cont[key] = cont
+        return with_warning(ref, warning)
+
+    def continuum(self, job: Job) -> ImpactResult | None:
+        """For a scene with an explicit mode count, its continuum reference (None when refused); None otherwise."""
+        from impactval.jobs import canonical_scene
+
+        key = (canonical_scene(job.scene), job.tol)
+        ref = self.ref(job)
+        if key not in self._cont:       # a reference handed in already solved (`known`): checked here, once
+            self._ref[key] = self._explicit_modes(job, key, ref)
+        return self._cont.get(key)
+
+    def reference_gap(self, job: Job, res: ImpactResult | None = None) -> dict[str, Any] | None:
+        """For a scene with an explicit mode count: {"hertz": the n-mode reference's departure from the continuum per
+        metric, "linear": the same for the linear theory of the row's spring (a linear-law row), "note": the row note
+        when it is significant}; None for other scenes (see make_row)."""
+        from impactval.jobs import canonical_scene
+        from impactval.reference.explicit_modes import (continuum_scene, explicit_count, significant,
+                                                        truncation_gap)
+
+        cont = self.continuum(job)
+        if cont is None:
+            return None
+        ref = self.ref(job)
+        out: dict[str, Any] = {"hertz": truncation_gap(ref, cont)}
+        n = explicit_count(job.scene)
+        if significant(ref, cont, job.tol):
+            g = out["hertz"]
+            out["note"] = (f"the reference is the scene's {n}-mode model (modes = {n}), {', '.join(f'{m} {100 * g[m]:+.3g} %' for m in METRICS)} "
+                           f"from the {job.scene.target.kind}'s continuum that this engine models: that is in this "
+                           f"row's structure error; remove `modes` from the scene to compare with the "
+                           f"{job.scene.target.kind}")
+        lin = self.lin(job, res) if res is not None else None
+        if lin is not None and lin.success:
+            k = _contact_stiffness(res)
+            key = (canonical_scene(job.scene), job.tol, k)
+            if key not in self._lin_cont:
+                def solve_lin() -> ImpactResult | None:
+                    try:
+                        return _linear_reference(continuum_scene(job.scene), job.tol, k)
+                    except ImpactvalError:
+                        return None
+                self._lin_cont[key] = self._timed(f"linear-theory reference {job.scene.name} without its modes = {n} "
+                                                  f"(tol {job.tol:g})", solve_lin)
+            lc = self._lin_cont[key]
+            if lc is not None and lc.success:
+                out["linear"] = truncation_gap(lin, lc)
+        return out
 
     def solved(self, scene, tol: float) -> ImpactResult | None:
         """The reference of `scene` at `tol` if it was solved (or refused: a failed result holding the refusal),
@@ -499,6 +586,33 @@ class _Signals:
         return False
 
 
+#: the progress kinds `run` and `execute` take by name (`impactval.progress.make_progress`)
+PROGRESS_KINDS = ("auto", "plain", "rich", "none")
+
+
+def _progress(progress: Any):
+    """`execute`'s progress argument as a progress object or None: a kind by name (PROGRESS_KINDS), True ("auto"),
+    None or False (silent), or an object with start/done/close (returned as is); anything else a one-line
+    ImpactvalError (a string such as "auto", as the README writes it, reached `progress.start` and raised
+    AttributeError)."""
+    from impactval.progress import make_progress
+
+    if progress is None or progress is False:
+        return None
+    if progress is True:
+        return make_progress("auto")
+    if isinstance(progress, str):
+        if progress not in PROGRESS_KINDS:
+            raise ImpactvalError(f"progress must be one of {', '.join(map(repr, PROGRESS_KINDS))}, True, False, None "
+                                 f"or a progress object, got {progress!r}.")
+        return make_progress(progress)
+    if not all(callable(getattr(progress, name, None)) for name in ("start", "started", "done", "close")):
+        raise ImpactvalError(f"progress must be one of {', '.join(map(repr, PROGRESS_KINDS))}, True, False, None or an "
+                             f"object with start, started, done and close methods (impactval.progress), got "
+                             f"{type(progress).__name__}.")
+    return progress
+
+
 def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, workers: int | None = None,
             scheduler: Any = None, force: bool = False, progress: Any = None, out: str | Path | None = None,
             command: str = "", tag: str | None = None, keep_series: bool = False,
@@ -516,7 +630,8 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     scheduler : Dask scheduler address ("tcp://host:8786"), Client or LocalCluster, optional
     force : bool
         Recompute jobs already in the store (the new rows replace the stored ones).
-    progress : object with start/started/done/close and optionally tick (see `impactval.progress`)
+    progress : "auto" (a live display on a terminal, lines otherwise), "plain", "rich", True ("auto"), None, False or
+        "none" (silent), or an object with start/started/done/close and optionally tick (see `impactval.progress`)
     out : directory, optional; recorded with the run (exports select runs by it)
     command, tag : recorded with the run
     keep_series : bool
@@ -542,6 +657,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     from impactval import executor as ex
     from impactval.store import pack_series
 
+    progress = _progress(progress)
     jobs = list(jobs)
     own_store = not isinstance(store, Store)
     db = Store(store) if own_store else store
@@ -566,7 +682,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
     def finish(k: str, res: ImpactResult, seconds: float) -> None:
         job = todo[k]
         row = make_row(run_id, job.scene, job.spec, job.settings, res, refs.ref(job), refs.lin(job, res), k,
-                       theory=refs.theory(job) if theory_gap else None)
+                       theory=refs.theory(job) if theory_gap else None, reference_gap=refs.reference_gap(job, res))
         meta = dict(engine_version=engines[job.spec], adapter_version=_adapter_version(job.spec),
                     reference_version=reference_version(), tol=float(job.tol),
                     settings=json.dumps(job.settings.as_dict(), sort_keys=True, default=repr),
@@ -577,7 +693,7 @@ def execute(jobs: Iterable[Job], *, store: Store | str | Path | None = None, wor
         rows[k] = stored
         if progress is not None:
             progress.done(job.label(), stored, seconds)
-            for warning in res.validity or ():      # the engine's own caveats, before any table or report
+            for warning in (res.validity or ()) if hasattr(progress, "note") else ():   # the engine's caveats first
                 progress.note(f"  note: {warning}")
         if on_row is not None:
             on_row(stored)

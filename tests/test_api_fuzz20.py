@@ -1,0 +1,40 @@
+"""The Python API as the README writes it (round 20, user test fuzz2: findings 2 and 3)."""
+import numpy as np
+import pytest
+
+import impactval
+from impactval.errors import ImpactvalError
+from impactval.runner import run
+
+
+def test_run_takes_progress_by_name_as_the_readme_says(tmp_path, capsys):
+    """README: `run(...)` takes `progress="auto"`; it raised AttributeError ('str' object has no attribute 'start'),
+    and so did progress=False. Names and booleans now work; anything else is a one-line ImpactvalError."""
+    for i, kind in enumerate(("auto", "plain", False, True, None, "none")):
+        df = run(["plate_steel"], ["impactval.engines.fake_:HertzSpringAdapter"], dt=1e-6, store=str(tmp_path / f"s{i}.sqlite"),
+                 progress=kind, workers=1)
+        assert df["status"].tolist() == ["ok"]
+    err = capsys.readouterr().err
+    assert "plate_steel" in err                          # the lines of "auto"/"plain" (not a terminal here)
+    for bad in ("fast", 3, object()):
+        with pytest.raises(ImpactvalError, match="^progress must be one of 'auto', 'plain', 'rich', 'none'"):
+            run(["plate_steel"], ["impactval.engines.fake_:HertzSpringAdapter"], dt=1e-6, store=str(tmp_path / "bad.sqlite"), progress=bad)
+
+
+def test_structure_modes_takes_a_name_or_path_and_checks_n():
+    """`impactval.structure_modes('file.toml', 5)` raised AttributeError ('str' object has no attribute 'target'),
+    unlike `solve`, and n = 10**7 ran. A name or path loads like `solve`'s; n outside 1 .. 100000 and a non-scene
+    are one-line errors. The worked beam's first mode against Euler-Bernoulli's closed form, (pi/L)^2 sqrt(EI/(rho A))."""
+    md = impactval.structure_modes("beam_ss_midspan", 3)
+    scene = impactval.load_scene("beam_ss_midspan")
+    b = scene.target
+    w1 = (np.pi / b.length) ** 2 * np.sqrt(b.material.young * b.width * b.height**3 / 12
+                                           / (b.material.density * b.width * b.height))
+    assert md.omega[0] == pytest.approx(w1, rel=1e-9)
+    assert np.array_equal(md.omega, impactval.structure_modes(scene, 3).omega)
+    for bad_n in (0, 10**7, 2.5, True):
+        with pytest.raises(ImpactvalError, match="^n must be a whole number from 1 to 100000"):
+            impactval.structure_modes("beam_ss_midspan", bad_n)
+    for bad in (None, 3.0):
+        with pytest.raises(ImpactvalError, match="a scene is a"):
+            impactval.structure_modes(bad, 5)
