@@ -161,6 +161,37 @@ def run_info(store, run_id: str, title: str | None = None) -> dict[str, Any]:
             "machine": f"{info.get('machine', '')}, Python {info.get('python', '')}"}
 
 
+def run_verdict(rows: pd.DataFrame, cmp: pd.DataFrame | None, ended: str, command: str = "") -> str:
+    """The verdict line of an `impactval run` report, the exit code the command gives for these rows: 1 when a row
+    failed (`runner.failed_rows`) or the baseline comparison `cmp` has a worse or newly failing row, 2 when nothing
+    was comparable with the baseline, else 0; "none" for a run that did not finish (it exits 130 / 143)."""
+    from impactval.history import comparable, regressions
+    from impactval.runner import failed_rows
+
+    if ended and ended != "finished":
+        return f"none: the run is {ended} (rerun its command to resume it; the rows below are those that finished)"
+    n = len(rows)
+    bad = failed_rows(rows) if n else pd.Series([], dtype=bool)
+    parts = []
+    if bad.any():
+        counts = rows[bad]["status"].astype(str).value_counts()
+        parts.append(f"{int(bad.sum())} of {n} rows failed ({', '.join(f'{k} {v}' for k, v in counts.items())})")
+    if cmp is not None and len(cmp):
+        if comparable(cmp) == 0:
+            return "exit 2: nothing was comparable with the baseline (see Against the baseline)"
+        marks = cmp["mark"].astype(str)
+        worse, newly = int((marks == "+").sum()), int((marks == "!").sum())
+        if worse or newly:
+            parts.append(f"against the baseline {worse} worse, {newly} newly failing")
+    code = 1 if bad.any() or (cmp is not None and len(cmp) and regressions(cmp)) else 0
+    if not parts:
+        counts = rows["status"].astype(str).value_counts() if n else {}
+        parts.append(f"no row failed ({', '.join(f'{k} {v}' for k, v in counts.items()) or 'no rows'})")
+    again = ("; its --baseline comparison is not re-done in a re-rendered report"
+             if cmp is None and "--baseline" in command else "")
+    return f"exit {code}: " + "; ".join(parts) + again
+
+
 def write_report(store, run_id: str, out: str | Path, *, title: str | None = None, rows: pd.DataFrame | None = None,
                  cmp: pd.DataFrame | None = None, baseline: str | None = None, checks=None,
                  history: pd.DataFrame | None = None, trend: pd.DataFrame | None = None, settings=None,
@@ -202,6 +233,8 @@ def write_report(store, run_id: str, out: str | Path, *, title: str | None = Non
                                 f"{history['run_index'].nunique()} runs", p.name))
     info = run_info(store, run_id, title)
     info.update(extra_info or {})
+    if "verdict" not in info and str(info.get("title", "")).startswith("impactval run"):
+        info["verdict"] = run_verdict(rows, cmp, str(info.get("ended", "")), str(info.get("command", "")))
     md = markdown_report(rows, settings, info=info, cmp=cmp, baseline=baseline, checks=checks, trend=trend,
                          references=refs, figures=sorted(figures, key=lambda f: f[1].startswith("trend_")))
     if notes:

@@ -1,4 +1,6 @@
-"""The Python API as the README writes it (round 20, user test fuzz2: findings 2 and 3)."""
+"""The Python API and the run report as the README writes them (round 20, user test fuzz2: findings 2, 3, 8)."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -38,3 +40,23 @@ def test_structure_modes_takes_a_name_or_path_and_checks_n():
     for bad in (None, 3.0):
         with pytest.raises(ImpactvalError, match="a scene is a"):
             impactval.structure_modes(bad, 5)
+
+
+def test_a_run_report_opens_with_the_verdict_its_exit_code_gives(tmp_path):
+    """README: every report gives its verdict first; a run report had none (an exit-1 run said "finished" and a
+    summary). The verdict line is the command's own exit code and why, checked against the real exit code of
+    `impactval run` for a clean run and for one whose engine raises."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "impactval.cli", "run", "plate_steel", "--dt", "1e-6"]
+    good = subprocess.run(cmd + ["--engines", "impactval.engines.fake_:HertzSpringAdapter", "--out",
+                                 str(tmp_path / "good")], capture_output=True, text=True)
+    bad = subprocess.run(cmd + ["--engines", "fake_engines:Raises", "--out", str(tmp_path / "bad")],
+                         capture_output=True, text=True, cwd=str(Path(__file__).parent))   # tests/fake_engines.py
+    assert good.returncode == 0 and bad.returncode == 1, (good.stderr, bad.stderr)
+    good_md = (tmp_path / "good" / "report.md").read_text()
+    bad_md = (tmp_path / "bad" / "report.md").read_text()
+    head = lambda md: md[:md.index("## ")]          # noqa: E731
+    assert "- **verdict**: exit 0: no row failed (ok 1)" in head(good_md)
+    assert "- **verdict**: exit 1: 1 of 1 rows failed (crashed 1)" in head(bad_md)
