@@ -310,7 +310,11 @@ def test_old_store_on_postgresql_gets_the_columns(postgres_url, tmp_path):
     SQLite file (reflected, so exactly main's schema), then opened by this impactval."""
     import sqlalchemy as sa
 
-    lite = sa.create_engine(f"sqlite:///{DATA / 'impactval.sqlite'}")
+    import shutil
+
+    copy = tmp_path / "v1.sqlite"              # a copy: reading the checked-in file left -shm/-wal files beside it
+    shutil.copy(DATA / "impactval.sqlite", copy)
+    lite = sa.create_engine(f"sqlite:///{copy}")
     md = sa.MetaData()
     md.reflect(lite)
     pg = sa.create_engine(postgres_url.replace("postgresql://", "postgresql+psycopg://", 1))
