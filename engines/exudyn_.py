@@ -68,14 +68,14 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from impactval.engines.base import (WINDOW_CAP, EngineAdapter, EngineDiverged, EngineSettings, Plan, Simulation,
                                     contact_mass, contacts_from_series, plate_times)
-from impactval.engines.options import boolean, in_range, non_negative, one_of, option, positive
+from impactval.engines.options import boolean, in_range, inapplicable_notes, non_negative, one_of, option, positive
 from impactval.errors import EngineError
 
 #: name -> exudyn.DynamicSolverType member
@@ -136,7 +136,7 @@ class ExudynOptions:
                                        "docs/exudyn.md)", _whole_positive)
     law: str = option("hertz", "'hertz' (default) or 'linear' (k0 = 0.8 alpha sqrt(delta_m), exponent 1)", one_of(*LAWS))
     user_function: str = option("symbolic", "'symbolic' (default) or 'python' (contact 'hertz' only)",
-                                one_of("symbolic", "python"))
+                                one_of("symbolic", "python"), contacts=("hertz",))
     spectral_radius: float = option(1.0, "generalized-alpha spectral radius in [0, 1] (default 1)", in_range(0.0, 1.0))
     rtol: float = option(1e-8, "relative tolerance of dopri5/ode23 in [1e-13, 1) (default 1e-8)", _tol_check(1e-13))
     atol: float | None = option(None, "absolute tolerance [m, m/s] of dopri5/ode23, >= 1e-18 (default rtol * 1e-3 * "
@@ -272,6 +272,12 @@ class ExudynAdapter(EngineAdapter):
         return None
 
     def plan(self, scene, settings: EngineSettings) -> Plan:
+        """`_plan`, headed by notes on options that do not apply to the contact mode (options.inapplicable_notes)."""
+        plan = self._plan(scene, settings)
+        notes = inapplicable_notes(settings, self.name)
+        return replace(plan, validity=(*notes, *plan.validity)) if notes else plan
+
+    def _plan(self, scene, settings: EngineSettings) -> Plan:
         """Model error of the modal body (the reference on its own modes vs the continuum) and, for the
         explicit integrators, the stability limit of the modes + ball + contact spring."""
         from impactval.engines.chain import modal_omega_max
@@ -313,8 +319,41 @@ class ExudynAdapter(EngineAdapter):
                                  scene.ball.mass, k)
         integ = settings.integrator or self.integrators[0]
         diag["integrator"] = integ          # also on a row refused before stepping (its series in a sweep)
-        bound = {"explicit-euler": 2.0, "rk44": 2.0 * math.sqrt(2.0), "rk67": 3.0}.get(integ, 2.0)
-        return Plan(bound / om, f"{integ}, modal body + ball + contact spring {k:.3g} N/m", err, diag)
+        diag["omega_max"] = om
+        what = f"{integ}, modal body + ball + contact spring {k:.3g} N/m"
+        if integ == "explicit-euler":
+            # forward Euler has no stable step: every undamped mode's energy grows by 1 + (omega dt)^2 per step
+            # (user test s20 fuzz2: "unstable ... at dt = 2e-07 s (predicted limit 7.04e-07 s)"); dt = auto is sized
+            # from an energy-growth budget instead (`resolve_dt`), and a failed row says so (`result_from`)
+            return Plan(math.inf, what, err, diag)
+        bound = {"rk44": 2.0 * math.sqrt(2.0), "rk67": 3.0}.get(integ, 2.0)
+        return Plan(bound / om, what, err, diag)
+
+    def resolve_dt(self, scene, settings: EngineSettings, plan: Plan) -> float:
+        """The base rule; explicit Euler (no stable step) refuses dt = auto with the stiffest mode's energy budget."""
+        if not settings.auto_dt or (settings.integrator or self.integrators[0]) != "explicit-euler":
+            return super().resolve_dt(scene, settings, plan)
+        om = plan.diagnostics.get("omega_max", math.nan)
+        window = _first_window(scene, settings)
+        need = euler_budget_dt(om, window, self.energy_growth_limit, budget=1.0)
+        raise EngineError(f"exudyn: explicit Euler has no stable step (every undamped mode's energy grows by "
+                          f"1 + (omega dt)^2 per step), so dt = auto is refused: keeping the stiffest mode "
+                          f"({om:.3g} rad/s) within the {self.energy_growth_limit:.0%} energy check over the "
+                          f"{window:.3g} s window needs dt <= {need:.2g} s ({window / need:.2g} steps); give --dt and "
+                          f"read the row's energy check (an impact excites the stiffest modes little), or use rk44.")
+
+    def result_from(self, scene, settings: EngineSettings, sim: Simulation, plan: Plan | None = None,
+                    law=None):
+        """The base's row; an explicit-Euler failure names the growth, not a stability limit it does not have."""
+        result = super().result_from(scene, settings, sim, plan, law)
+        om = (plan.diagnostics.get("omega_max") if plan is not None else None)
+        if (settings.integrator or self.integrators[0]) != "explicit-euler" or not om or result.status.value == "ok":
+            return result
+        text = euler_growth_text(om, float(settings.dt), _first_window(scene, settings), self.energy_growth_limit)
+        msg = result.message.replace("(predicted limit none (implicit))", f"({text})")
+        if msg == result.message:
+            msg = f"{msg}; {text}"
+        return replace(result, message=msg)
 
     # ------------------------------------------------------------------ structure
     def _structure(self, scene, settings: EngineSettings) -> _Structure | _Cable | None:
@@ -713,6 +752,34 @@ def _note_mode_cap(structure: _Structure, scene, settings: EngineSettings, n: in
     structure.diagnostics.setdefault("validity", []).append(
         head + (": its model error holds the truncation; give --modes" + (f", or {other}" if other else "")
                 if cause else ""))
+
+
+#: explicit Euler: the fraction of the energy check's limit a budgeted step leaves to the stiffest mode's growth
+EULER_GROWTH_BUDGET = 1.0
+
+
+def _first_window(scene, settings: EngineSettings) -> float:
+    """The first simulated window [s] (`simulate`: WINDOW_START rigid-plate contact times + tail)."""
+    return WINDOW_START * plate_times(scene).t_m + settings.tail
+
+
+def euler_budget_dt(omega_max: float, duration: float, allowed: float = 0.05,
+                    budget: float = EULER_GROWTH_BUDGET) -> float:
+    """The largest explicit-Euler step [s] whose stiffest undamped mode (omega_max [rad/s]) grows its energy by at
+    most budget * allowed over `duration` [s]: growth per step 1 + (omega dt)^2, so over n = duration/dt steps
+    (1 + (omega dt)^2)^n ~ exp(duration omega^2 dt) <= 1 + budget * allowed."""
+    return math.log1p(budget * allowed) / (duration * omega_max ** 2)
+
+
+def euler_growth_text(omega_max: float, dt: float, duration: float, allowed: float = 0.05) -> str:
+    """One clause for an explicit-Euler row: no stability limit, the predicted growth at this dt, the step that keeps
+    it within the budget."""
+    n = duration / dt
+    growth = math.expm1(min(n * math.log1p((omega_max * dt) ** 2), 700.0))
+    grew = f"x{1 + growth:.3g}" if growth >= 1 else f"+{100 * growth:.3g} %"
+    return (f"explicit Euler has no stability limit: every undamped mode's energy grows by 1 + (omega dt)^2 per step; "
+            f"the stiffest ({omega_max:.3g} rad/s) predicts {grew} over the {duration:.3g} s window at dt = {dt:.3g} s; "
+            f"keeping that mode within {allowed:.0%} needs dt <= {euler_budget_dt(omega_max, duration, allowed, 1.0):.2g} s")
 
 
 def _law_numbers(scene, settings: EngineSettings) -> tuple[float, float]:

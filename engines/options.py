@@ -18,9 +18,29 @@ from typing import Any, Callable, Iterable
 from impactval.errors import EngineError
 
 
-def option(default: Any, doc: str, check: Callable[[Any], Any] | None = None) -> Any:
-    """A dataclass field for an Options class: default, one-line doc (with unit), value check."""
-    return field(default=default, metadata={"doc": doc, "check": check})
+def option(default: Any, doc: str, check: Callable[[Any], Any] | None = None,
+           contacts: tuple[str, ...] | None = None) -> Any:
+    """A dataclass field for an Options class: default, one-line doc (with unit), value check, and `contacts`: the
+    contact modes (`settings.contact`) it applies to (None: every one; see `inapplicable_notes`)."""
+    return field(default=default, metadata={"doc": doc, "check": check, "contacts": contacts})
+
+
+def inapplicable_notes(settings, engine: str) -> tuple[str, ...]:
+    """Row notes for options given (not at their default) that do not apply to the row's contact mode: they are
+    ignored, which a user asking for e.g. a native contact stiffness under the Hertz contact must be told (user
+    test s20 fuzz2, finding 7)."""
+    opts = settings.options
+    if not dataclasses.is_dataclass(opts):
+        return ()
+    notes = []
+    for f in fields(opts):
+        allowed = f.metadata.get("contacts")
+        value = getattr(opts, f.name)
+        if allowed and settings.contact not in allowed and value != f.default:
+            shown = f"{value:g}" if isinstance(value, float) else str(value)
+            notes.append(f"option {engine}.{f.name} = {shown} does not apply to contact {settings.contact!r} "
+                         f"(only to {' / '.join(allowed)}): ignored")
+    return tuple(notes)
 
 
 # ---------------------------------------------------------------------------- value checks
@@ -177,5 +197,5 @@ def as_dict(options: Any) -> dict[str, Any]:
     return dataclasses.asdict(options) if dataclasses.is_dataclass(options) else {}
 
 
-__all__ = ["option", "parse_options", "check_prefixes", "options_for", "describe", "NoOptions", "positive",
+__all__ = ["option", "inapplicable_notes", "parse_options", "check_prefixes", "options_for", "describe", "NoOptions", "positive",
            "non_negative", "one_of", "in_range", "boolean", "numbers", "whole_numbers", "engine_key"]

@@ -75,7 +75,7 @@ import numpy as np
 from impactval.engines.base import EngineSettings, Plan, SteppingAdapter, plate_times
 from impactval.engines.chain import (DEFAULT_CHAIN_TOL, HenckyChain, centring, chain_notes, hencky_chain, omega_max,
                                      segments_for)
-from impactval.engines.options import in_range, non_negative, one_of, option, positive
+from impactval.engines.options import inapplicable_notes, in_range, non_negative, one_of, option, positive
 from impactval.errors import EngineError
 
 NATIVE_ROUTES = ("global", "per-body")
@@ -104,10 +104,10 @@ class PybulletOptions:
     """`--option pybullet.KEY=VALUE`."""
 
     native_route: str = option("global", "native linear contact route: 'global' (ERP/CFM, nearly elastic, default) "
-                               "or 'per-body' (contactStiffness, implicit, dissipative)", one_of(*NATIVE_ROUTES))
+                               "or 'per-body' (contactStiffness, implicit, dissipative)", one_of(*NATIVE_ROUTES), contacts=("native",))
     contact_erp: float = option(1e3, "contactERP of the global route (default 1e3)", positive)
-    contact_stiffness: float | None = option(None, "per-body contactStiffness [N/m] (native; default k0)", positive)
-    contact_damping: float | None = option(None, "per-body contactDamping [N s/m] (native; default 0)", non_negative)
+    contact_stiffness: float | None = option(None, "per-body contactStiffness [N/m] (native; default k0)", positive, contacts=("native",))
+    contact_damping: float | None = option(None, "per-body contactDamping [N s/m] (native; default 0)", non_negative, contacts=("native",))
     erp: float | None = option(None, "global contactERP (native; with cfm: a spring of erp/(cfm dt))", positive)
     cfm: float | None = option(None, "globalCFM (native; with erp)", positive)
     chain_tol: float = option(DEFAULT_CHAIN_TOL, f"relative tolerance the chain is sized for (default "
@@ -295,7 +295,8 @@ class PybulletAdapter(SteppingAdapter):
             if chain.shear and settings.segments is None and any(v.startswith("chain capped") for v in notes):
                 notes.append(f"Timoshenko chain: a slide and a hinge link per segment, so at most {cap} segments "
                              f"({MAX_SIZED_LINKS} of Bullet's {MAX_LINKS} links per multibody)")
-        return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag, tuple(notes))
+        return Plan(2.0 / om, f"semi-implicit Euler, {what}", err, diag,
+                    (*inapplicable_notes(settings, self.name), *notes))
 
     # ------------------------------------------------------------------ the job
     def build(self, scene, settings: EngineSettings) -> "_Run":
@@ -342,9 +343,13 @@ class PybulletAdapter(SteppingAdapter):
         run.client.close()
 
     def simulate(self, scene, settings: EngineSettings):
+        from impactval.engines.base import add_validity, modes_not_applied
+
         sim = super().simulate(scene, settings)
+        n_modes, note = modes_not_applied(scene, settings, "pybullet")
+        add_validity(sim.diagnostics, note)
         sim.settings = {"segments": sim.diagnostics.get("segments"), "integrator": "semi-implicit-euler",
-                        "native_route": sim.diagnostics.get("native_route")}
+                        "native_route": sim.diagnostics.get("native_route"), "modes": n_modes}
         if settings.contact == "native":
             from impactval.reference.hertz import ContactLaw
 

@@ -17,6 +17,25 @@ import threading
 import time
 
 _HEADER = struct.Struct("!Q")
+#: written once on stdout after the imports: the worker is ready for jobs
+READY = b"R"
+
+
+def _preload(spec: str) -> None:
+    """Import the adapter of `spec` and its engine module before reporting ready (a failure is left to the job)."""
+    if not spec:
+        return
+    try:
+        import importlib
+        import importlib.util
+
+        from impactval.engines.base import adapter_class
+
+        module = getattr(adapter_class(spec), "module", None)
+        if isinstance(module, str) and module and importlib.util.find_spec(module) is not None:
+            importlib.import_module(module)
+    except Exception:  # noqa: BLE001 - the job itself reports an unloadable engine
+        pass
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -59,6 +78,9 @@ def main() -> None:
     os.close(devnull)
     from impactval.executor import execute_job
 
+    _preload(sys.argv[2] if len(sys.argv) > 2 else "")
+    proto_out.write(READY)          # the parent starts a job's clock here: start-up is not charged to a job
+    proto_out.flush()
     while True:
         head = _read(proto_in, _HEADER.size)
         if head is None:

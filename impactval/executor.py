@@ -37,6 +37,10 @@ from impactval.reference.result import ImpactResult, Status
 from impactval.engines.base import _dt_text
 
 _HEADER = struct.Struct("!Q")
+READY = b"R"            # impactval._worker.READY (not imported here: the worker module is the child's)
+#: a worker's start-up (interpreter, impactval, the engine's import) may take this long [s] (or the job's timeout if
+#: longer) before its first job's clock starts
+STARTUP_TIMEOUT_S = 120.0
 
 
 def execute_job(spec: str, scene, settings) -> ImpactResult:
@@ -78,7 +82,8 @@ class EngineWorker:
         # the parent's import path goes along (as multiprocessing's spawn does), so adapters given
         # as "module:Class" import in the worker exactly as they would in the parent
         env = {**os.environ, "IMPACTVAL_WORKER_SYS_PATH": os.pathsep.join(p or os.getcwd() for p in sys.path)}
-        self.proc = subprocess.Popen([sys.executable, "-m", "impactval._worker", str(os.getpid())],
+        self.ready = False
+        self.proc = subprocess.Popen([sys.executable, "-m", "impactval._worker", str(os.getpid()), spec],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                      bufsize=0, close_fds=True, env=env)
         _REGISTRY.add(self)
@@ -130,6 +135,25 @@ class EngineWorker:
         (and this worker must then be discarded: `alive` is False)."""
         name = _engine_name(self.spec)
         payload = pickle.dumps((self.spec, scene, settings), protocol=pickle.HIGHEST_PROTOCOL)
+        if not self.ready:
+            # the job's clock starts when the worker has imported its engine: a replacement's start-up after a
+            # timeout was charged to the next job, marked "timeout" (user test s20 fuzz2, finding 5)
+            wait = max(settings.timeout_s, STARTUP_TIMEOUT_S)
+            t_start = time.monotonic()
+            try:
+                self.ready = self._read_exactly(len(READY), t_start + wait) == READY
+            except OSError:
+                self.ready = False
+            if not self.ready:
+                alive = self.proc.poll() is None
+                self.kill()
+                if alive:
+                    return ImpactResult.failed(scene.name, name, Status.TIMEOUT,
+                                               f"engine worker not ready after {wait:g} s (start-up: imports); the job "
+                                               f"did not start (dt = {_dt_text(settings.dt)})", settings=settings.as_dict())
+                return ImpactResult.failed(scene.name, name, Status.CRASHED,
+                                           f"engine process died during start-up (exit code {self.proc.returncode})",
+                                           settings=settings.as_dict())
         t0 = time.monotonic()
         deadline = t0 + settings.timeout_s
         try:

@@ -70,11 +70,19 @@ def _ran(r) -> bool:
     return not (_num(_col(r, "n_steps")) == 0 and _num(_col(r, "wall_time_build_s")) == 0)
 
 
+def _contact_cell(r) -> str:
+    """The row's contact mode, and the law that ran when an option changed a "hertz" contact's law (an Exudyn row with
+    law=linear said "hertz": user test s20 fuzz2, finding 7)."""
+    contact, law = str(r["contact"]), _col(r, "contact_law")
+    law = "" if law is None or (isinstance(law, float) and pd.isna(law)) else str(law)
+    return f"{contact} (law {law})" if contact == "hertz" and law and law != "hertz" else contact
+
+
 #: (header, cell function, right-aligned) of the results table, in order
 _COLUMNS = (
     ("scene", lambda r: str(r["scene"]), False),
     ("engine", lambda r: str(r["engine"]), False),
-    ("contact", lambda r: str(r["contact"]), False),
+    ("contact", lambda r: _contact_cell(r), False),
     ("integrator", lambda r: "" if pd.isna(r["integrator"]) else str(r["integrator"]), False),
     ("dt [s]", lambda r: _dt(r["dt"]), False),
     ("N", lambda r: _seg(r["segments"]), False),
