@@ -249,6 +249,35 @@ def nice_step(dt: float) -> float:
     return 10.0 ** (e - 1) * 5.0
 
 
+def modes_not_applied(scene, settings: EngineSettings, engine: str, structure: str = "chain") -> tuple[int | None, str]:
+    """For an engine that models every mode of a modal target (one oscillator per mode) and a beam as a `structure`
+    sized by its segments (MuJoCo, PyBullet): (the mode count it models: the modal target's all, else None; a row note
+    when `settings.modes` (--modes) asked for something it does not apply, else ""). The row's N then says what was
+    built (a `--modes 2` on a 3-mode target was shown as N = 2 for the 3-mode model)."""
+    target = scene.target
+    kind = getattr(target, "kind", "")
+    n_model = len(target.omega) if kind == "modal" else None
+    asked = settings.modes
+    if asked is None:
+        return n_model, ""
+    if kind == "modal":
+        if asked == n_model:
+            return n_model, ""
+        return n_model, (f"--modes {asked} does not apply to {engine}'s modal target: it builds one oscillator per mode "
+                         f"of the scene (all {n_model}), the model the reference solves")
+    what = {"beam": f"beam, a {structure} sized by --segments", "plate": "plate", "rigid-plate": "rigid plate",
+            "ball": "second ball"}.get(kind, f"{kind} target")
+    return n_model, f"--modes {asked} does not apply to {engine}'s {what}: ignored"
+
+
+def add_validity(diagnostics: dict, note: str) -> None:
+    """Append `note` to `diagnostics["validity"]` (a string or a list; the runner shows them with the row)."""
+    if not note:
+        return
+    v = diagnostics.get("validity")
+    diagnostics["validity"] = ([v] if isinstance(v, str) and v else list(v or ())) + [note]
+
+
 def plate_times(scene):
     """The rigid-plate Hertz impact of the scene's contact (closed form): for a second ball (target kind
     "ball") the equivalent ball on a plate (reduced mass m1 m2/(m1 + m2), approach speed v1 + v2, same

@@ -755,8 +755,12 @@ class MujocoAdapter(SteppingAdapter):
             from impactval.reference.hertz import ContactLaw
 
             sim.contact_law = ContactLaw.linear(k_lin)
+        from impactval.engines.base import add_validity, modes_not_applied
+
+        n_modes, note = modes_not_applied(scene, settings, "mujoco")
+        add_validity(sim.diagnostics, note)
         sim.settings = {"integrator": settings.integrator or INTEGRATORS[0],
-                        "segments": sim.diagnostics.get("segments")}
+                        "segments": sim.diagnostics.get("segments"), "modes": n_modes}
         if scene.target.kind == "beam":
             from impactval.engines.chain import continuum_frequencies
 

@@ -24,7 +24,11 @@ def solve(scene, tol: float = 1e-6, **kwargs):
     """Reference solution of `scene` (Hertz contact + modal structure) to relative tolerance `tol`.
 
     `scene` is a Scene, a catalogue name or a path to a TOML file. Options: `window` [s] (time
-    followed after the first contact), `modes` (beam mode count), `static_correction` (bool); see
+    followed after the first contact), `modes` (beam or plate mode count: an explicit count, here or
+    the scene's, makes the reference exactly these n modes, the paper's modal model, without the
+    dropped modes' residual; its uncertainty covers that model's time step, not its distance to the
+    continuum), `static_correction` (bool, default True: the residual static flexibility of the
+    dropped modes, used only with an automatic mode count, ignored with an explicit one); see
     :func:`impactval.reference.solve.solve`. Bad arguments raise ImpactvalError naming the argument.
     """
     if not _SOLVE_IMPL:

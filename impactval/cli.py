@@ -106,6 +106,7 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
               model: str = "nonlinear", explain: bool = False) -> None:
     """Reference solution of SCENE (catalogue names or TOML paths; none = the whole catalogue)."""
     import impactval
+    from impactval.reference.explicit_modes import explicit_count, truncation_check, with_warning
     from impactval.scenarios.scene import catalogue_names
 
     names = list(scene) or catalogue_names()
@@ -132,6 +133,8 @@ def reference(scene: tuple[str, ...], tol: float, window: float, as_json: bool, 
                    f"{'modes':>5s} {'contacts':>8s}")
     for sc in scenes_:
         r = impactval.solve(sc, tol=tol, window=window)
+        if explicit_count(sc) is not None:      # modes = n: the n-mode model, checked against the continuum
+            r = with_warning(r, truncation_check(sc, r, tol)[1])
         u = r.uncertainty
         check_answer(sc.name, t_m=r.t_m, f_m=r.f_m, delta_m=r.delta_m, uncertainty_t_m=u.t_m,
                      uncertainty_f_m=u.f_m, uncertainty_delta_m=u.delta_m, rebound_velocity=r.rebound_velocity,

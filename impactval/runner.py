@@ -176,13 +176,16 @@ class TheoryGap:
     timoshenko_frequencies: tuple[float, ...] = field(default=())
 
 
-def _structure_size(scene, rs: Mapping[str, Any], settings: EngineSettings, diag: Mapping[str, Any]) -> str:
+def _structure_size(scene, rs: Mapping[str, Any], settings: EngineSettings, diag: Mapping[str, Any],
+                    ok: bool = True) -> str:
     """The run table's N: chain segments, fe-beam elements or the modes of a modal body, as the engine used them
     (its result settings, then what was asked, then a refused row's plan); none for a target without a structure
     to size (a rigid plate, a second ball: `--segments 35` showed N = 35 there) and, for a modal target, only the
     modes an engine reports (the scene's own)."""
     kind = getattr(scene.target, "kind", "")
     if kind in ("rigid-plate", "ball"):
+        return ""
+    if kind == "modal" and not ok:      # a failed row's settings are only what was asked (--modes 2 on 3 modes)
         return ""
     order = (rs.get("modes"),) if kind == "modal" else (rs.get("segments"), rs.get("modes"), settings.segments,
                                                         settings.modes, diag.get("segments"))
@@ -220,7 +223,7 @@ def make_row(run_id: str, scene, spec: str, settings: EngineSettings, res: Impac
         integrator=rs.get("integrator") or settings.integrator or diag.get("integrator") or "", dt=dt,
         # structure size: chain segments, or the mode count of a modal (FFRF) body; a row refused before
         # stepping has the planned size in its diagnostics (so it joins its series: sweep's stability table)
-        segments=_structure_size(scene, rs, settings, diag),
+        segments=_structure_size(scene, rs, settings, diag, res.success),
         status=str(res.status), message=res.message,
         t_m=res.t_m, f_m=res.f_m, delta_m=res.delta_m, ref_t_m=ref.t_m, ref_f_m=ref.f_m, ref_delta_m=ref.delta_m,
         err_t_m=err["t_m"], err_f_m=err["f_m"], err_delta_m=err["delta_m"],

@@ -345,10 +345,14 @@ def solve(scene, tol: float = 1e-6, window: float = 0.0, modes: int | None = Non
     window : float
         Time [s] to keep integrating after the first contact ends (re-contacts).
     modes : int, optional
-        Beam mode count; overrides the scene's `modes`. An explicit count defines the model (exactly
-        n modes, no residual); None with no count in the scene chooses it automatically.
+        Beam or plate mode count; overrides the scene's `modes`. An explicit count defines the model
+        (exactly n modes, no residual: the paper's modal model), and the uncertainty covers only that
+        model's time step, not its distance to the continuum (no warning is made here, to keep this call's
+        cost: `impactval run` and `impactval reference` add one, reference/explicit_modes.py); None with
+        no count in the scene chooses it automatically.
     static_correction : bool
-        With an automatic mode count, add the residual static flexibility of the dropped modes.
+        With an automatic mode count only, add the residual static flexibility of the dropped modes; with
+        an explicit count (`modes=` or the scene's) it is not used (the n-mode model has no residual).
     """
     if not (hasattr(scene, "ball") and hasattr(scene, "target")):
         hint = f" (call impactval.solve(impactval.load_scene({scene!r})))" if isinstance(scene, str) else ""
