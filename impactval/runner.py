@@ -867,7 +867,8 @@ def run(scenes: Iterable, engines: Iterable[str] | str = ("mujoco",), settings: 
         engines = [e.strip() for e in engines.split(",") if e.strip()]
     if not isinstance(engines, Iterable):
         raise EngineError(f"engines must be engine names (a list or a comma-separated string), got {engines!r}.")
-    specs = [resolve_engine(e) for e in engines]
+    # each engine once (`--engines mujoco,mujoco` ran every job twice and counted both in the summary)
+    specs = list(dict.fromkeys(resolve_engine(e) for e in engines))
     if not specs:
         raise EngineError("no engine given; known: " + ", ".join(ENGINES) + ".")
     base = settings or EngineSettings()

@@ -452,13 +452,18 @@ def frequency_section(df: pd.DataFrame) -> list[str]:
         return []
     out = ["## Structure model frequencies [rad/s] (engine model vs continuum)", "",
            "Each mode: the engine model's frequency, then its signed difference to the Euler-Bernoulli continuum "
-           "(EB) and, for beams, to the Timoshenko beam (both spectra in frequency order).", ""]
+           "(EB; for a modal target the scene's given frequencies) and, for beams, to the Timoshenko beam (both "
+           "spectra in frequency order).", ""]
     for _, r in freq.drop_duplicates(["scene", "engine", "segments"]).iterrows():
         s, c, t = (_freqs(r, k) for k in ("structure_frequencies", "continuum_frequencies", "timoshenko_frequencies"))
+        # a beam's continuum is Euler-Bernoulli's; a modal target's is the scene's own list ("EB" there named a beam
+        # that does not exist: user test s20)
+        theory = str(r["beam_theory"]) if "beam_theory" in r and isinstance(r["beam_theory"], str) else None
+        beam = theory is None or bool(theory.strip()) or bool(t)    # an older store (no column): as before
         items = []
         for i, a in enumerate(s[:N_MODES_SHOWN]):
-            diffs = [f"{label} {100 * (a / ref[i] - 1):+.2f} %" for label, ref in (("EB", c), ("Timoshenko", t))
-                     if i < len(ref) and ref[i] > 0]
+            diffs = [f"{label} {100 * (a / ref[i] - 1):+.2f} %" for label, ref in
+                     (("EB" if beam else "given", c), ("Timoshenko", t)) if i < len(ref) and ref[i] > 0]
             items.append(f"{a:.1f}" + (f" ({', '.join(diffs)})" if diffs else ""))
         out.append(f"- {r['scene']} / {r['engine']} (N = {_seg(r['segments'])}): {'; '.join(items)}")
     return out + [""]

@@ -60,3 +60,30 @@ def test_a_run_report_opens_with_the_verdict_its_exit_code_gives(tmp_path):
     head = lambda md: md[:md.index("## ")]          # noqa: E731
     assert "- **verdict**: exit 0: no row failed (ok 1)" in head(good_md)
     assert "- **verdict**: exit 1: 1 of 1 rows failed (crashed 1)" in head(bad_md)
+
+
+def test_an_engine_named_twice_runs_once(tmp_path):
+    """`--engines mujoco,mujoco` ran each job twice: the table printed it twice and the summary said "jobs 2, ok 2"
+    while results.csv kept one row. An engine named twice (also as the same adapter spelt twice) runs once."""
+    fake = "impactval.engines.fake_:HertzSpringAdapter"
+    df = run(["plate_steel"], f"{fake},{fake}", dt=1e-6, store=str(tmp_path / "s.sqlite"), progress=None, workers=1)
+    assert len(df) == 1 and df["status"].tolist() == ["ok"]
+
+
+def test_a_modal_targets_frequencies_are_not_labelled_euler_bernoulli(tmp_path):
+    """The report's structure-frequency list labelled a modal target's given omegas "EB +0.00 %" (there is no beam);
+    they are "given", and a beam's row still reads EB."""
+    pytest.importorskip("mujoco", reason="pip install 'impactval[mujoco]'")
+    pytest.importorskip("exudyn", reason="pip install 'impactval[exudyn]'")       # its modal rows list frequencies
+    path = tmp_path / "mod3.toml"
+    path.write_text('name = "mod3"\n[ball]\nradius = 0.006\nvelocity = 2.0\nmaterial = "titanium"\n'
+                    '[target]\nkind = "modal"\nmaterial = "steel"\nomega = [15000.0, 60000.0, 210000.0]\n'
+                    'modal_mass = [0.2, 0.35, 0.6]\nphi = [0.9, -0.6, 0.4]\n')
+    run([str(path)], ["exudyn"], out=tmp_path / "modal", store=str(tmp_path / "s.sqlite"), progress=None, workers=1)
+    run(["beam_ss_midspan"], ["mujoco"], out=tmp_path / "beam", store=str(tmp_path / "s.sqlite"), progress=None,
+        workers=1)
+    lines = [ln for d in ("modal", "beam") for ln in (tmp_path / d / "report.md").read_text().splitlines()]
+    modal = next(ln for ln in lines if ln.startswith("- mod3 / exudyn (N"))
+    beam = next(ln for ln in lines if ln.startswith("- beam_ss_midspan / mujoco (N = ") and "(EB" in ln)
+    assert "15000.0 (given +0.00 %)" in modal and "EB" not in modal, modal
+    assert "EB " in beam and "Timoshenko" in beam, beam
