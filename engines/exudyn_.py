@@ -924,12 +924,8 @@ def _fem_structure(beam, n: int, elements, use_cache: bool) -> _Structure:
     return s
 
 
-#: the solid's first modes (FREQ_GAP_MODES of them) may differ from the scene theory's by this fraction before a row
-#: note names the gap as a cause: a discretised chain follows Timoshenko's first modes within ~0.4 % (fz3002, PyBullet),
-#: and a 1 % frequency shift moves f_m by ~0.2-0.25 % (fz3002: 3.6-5.0 % stiffer, +0.76 % in f_m), a quarter of the
-#: default mode_tol: above it the gap is a cause worth naming, below it is noise
-FREQ_GAP = 1e-2
-FREQ_GAP_MODES = 4
+#: the solid's first-mode gap that a row note names as a cause: engines.base FREQ_GAP (shared with the report's split)
+from impactval.engines.base import FREQ_GAP, FREQ_GAP_MODES  # noqa: E402
 #: ... and only when the body's structure error (worst metric) reaches this fraction of mode_tol: the stubby catalogue
 #: beam's first modes are 0.5-1.7 % stiffer than Timoshenko's, but its structure error is 0.43 % (no note)
 NOTE_MIN_ERROR = 0.5

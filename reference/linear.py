@@ -211,7 +211,7 @@ def linear_system(modes: Modes, mass: float, k: float) -> LinearSystem:
     d = np.concatenate(([0.0], omega**2))
     order = np.argsort(d)
     ds = d[order]
-    if len(ds) > 1 and np.any(np.diff(ds) <= 1e-12 * ds[1:]):
+    if len(ds) > 1 and np.any(np.diff(ds) <= REPEATED * ds[1:]):
         # repeated poles left after merge_repeated_modes (a mode of zero frequency, the ball's own): the rank-one
         # structure is degenerate; dense solver, U kept whole (O(modes^2))
         lam, V = linalg.eigh(np.diag(d) + ks * np.outer(bt, bt))

@@ -511,11 +511,8 @@ def _theory_verdict(r, scene_theory: str, other: str) -> str:
             "is part of it)")
 
 
-#: the engine model's first FREQ_GAP_MODES frequencies may differ from the scene theory's by this fraction before the
-#: split names the gap as a cause (the same threshold as the Exudyn adapter's note, engines/exudyn_.py FREQ_GAP: a
-#: chain follows Timoshenko's first modes within ~0.4 %; 1 % in frequency moves f_m by ~0.2-0.25 %)
-FREQ_GAP = 1e-2
-FREQ_GAP_MODES = 4
+#: the first-mode gap the split names as a cause: engines.base FREQ_GAP, the threshold of the Exudyn adapter's note too
+from impactval.engines.base import FREQ_GAP, FREQ_GAP_MODES  # noqa: E402
 
 
 def _first_mode_gap(r, scene_theory: str) -> str:
